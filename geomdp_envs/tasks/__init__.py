@@ -1,0 +1,1 @@
+"""The GeoMDP tasks, one module each."""
