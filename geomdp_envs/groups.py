@@ -96,7 +96,7 @@ def _closure(generators: list[np.ndarray]) -> np.ndarray:
     return np.stack(list(elements.values()))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _finite_elements(name: str) -> np.ndarray:
     match = _PLANAR_FINITE.match(name)
     if match:

@@ -12,7 +12,9 @@ simulator state (``transform_state``), which is what ``check_symmetry`` needs.
 
 from __future__ import annotations
 
+import atexit
 import copy
+import importlib.util
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,10 +39,17 @@ class SimState:
         return copy.deepcopy(self)
 
 
-def unknown_kwargs_error(env_name: str, unknown: dict[str, Any], valid: list[str]) -> ValueError:
-    names = ", ".join(sorted(unknown))
-    return ValueError(f"{env_name}: unknown argument(s) {names}; valid arguments: "
-                      + ", ".join(valid))
+class UnknownArgumentError(ValueError, TypeError):
+    """An unknown keyword argument: a ValueError, and a TypeError as Python raises
+    for unexpected keywords (TorchRL's GymEnv relies on that to drop its
+    ``frameskip`` probe)."""
+
+
+def unknown_kwargs_error(env_name: str, unknown: dict[str, Any],
+                         valid: list[str]) -> UnknownArgumentError:
+    names = ", ".join(repr(name) for name in sorted(unknown))
+    return UnknownArgumentError(f"{env_name}: unexpected keyword argument {names}; "
+                                "valid arguments: " + ", ".join(valid))
 
 
 class GeometricMujocoEnv(gymnasium.Env[np.ndarray, np.ndarray]):
@@ -119,7 +128,9 @@ class GeometricMujocoEnv(gymnasium.Env[np.ndarray, np.ndarray]):
             gymnasium.logger.warn("render() called without render_mode='rgb_array'")
             return None
         if self._renderer is None:
+            load_triton_before_mesa()
             self._renderer = mujoco.Renderer(self.model, *self._render_size)
+            atexit.register(self.close)  # free the GL context while OpenGL is still loaded
         self._renderer.update_scene(self.data, camera=self._camera)
         return self._renderer.render()
 
@@ -175,3 +186,15 @@ class GeometricMujocoEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         else:
             mujoco.mj_step2(self.model, self.data)
         mujoco.mj_step1(self.model, self.data)
+
+
+def load_triton_before_mesa() -> None:
+    """Import triton (shipped with CUDA builds of torch) before Mesa's GL is loaded.
+
+    Mesa's software renderer and triton each bring their own LLVM; loading
+    triton's after Mesa's crashes the process (seen with torch 2.14.1 and Mesa
+    22.3: render a frame, then import tensordict -> segfault). In the other
+    order both work.
+    """
+    if importlib.util.find_spec("triton") is not None:
+        import triton  # noqa: F401
