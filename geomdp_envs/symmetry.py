@@ -73,6 +73,11 @@ class Field:
     def size(self) -> int:
         return self.stop - self.start
 
+    @property
+    def label(self) -> str:
+        """The name, with the particle index where there is one: ``position[2]``."""
+        return self.name if self.particle is None else f"{self.name}[{self.particle}]"
+
 
 def layout(dim: int, entries: list[tuple[str, str] | tuple[str, str, int]]) -> tuple[Field, ...]:
     """Fields laid out one after another from ``(name, rep[, particle])`` entries."""
@@ -231,12 +236,14 @@ class Symmetry:
         rows = [f"exact group: {self.exact_group} (of {self.continuous_group})", "",
                 "| vector | slice | field | representation |", "|---|---|---|---|"]
         for kind, fields in (("observation", self.observation), ("action", self.action)):
-            rows += [f"| {kind} | [{f.start}:{f.stop}] | {f.name} | {f.rep} |" for f in fields]
+            rows += [f"| {kind} | [{f.start}:{f.stop}] | {f.label} | {f.rep} |" for f in fields]
         return "\n".join(rows)
 
 
 def _apply(matrix: np.ndarray, x: Any, size: int, kind: str) -> Any:
     """x @ matrix.T for numpy arrays or torch tensors of shape [..., size]."""
+    if not hasattr(x, "shape"):
+        x = np.asarray(x, dtype=np.float64)
     if x.shape[-1] != size:
         raise ValueError(f"{kind} has last dimension {x.shape[-1]}, expected {size}")
     if isinstance(x, np.ndarray):
