@@ -1,0 +1,235 @@
+"""The networks of TD-MPC, plain or G-equivariant from one definition.
+
+``build_networks(symmetry, config)`` reads a task's symmetry declaration and
+builds the encoder, latent dynamics, reward, twin Q and policy. With
+``config.group = None`` every layout is a plain size and every network an MLP;
+with a group, the observation and action layouts are the declared fields as
+escnn field types, hidden layers and the latent state are regular fields, and
+the same ``FieldMLP`` becomes equivariant (vector outputs) or invariant (scalar
+outputs). Each component can be plain or equivariant on its own
+(``config.equivariant``), for the paper's ablation.
+
+Width strategies turn a plain width W into copies of the regular representation
+of G: ``sqrt`` uses W / sqrt(|G|) copies (about the plain network's number of
+free parameters, |G| times its FLOPs), ``linear`` W / |G| copies (the plain
+network's tensor width and FLOPs, |G| times fewer parameters).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import torch
+from torch import nn
+
+from agents.groups import AgentGroup, field_type, group_for_task
+from agents.layers import (
+    FieldLayerNorm,
+    Layout,
+    activation,
+    concat,
+    layout_size,
+    make_linear,
+)
+from geomdp_envs.symmetry import Field, Symmetry
+
+WIDTH_STRATEGIES = ("sqrt", "linear")
+COMPONENTS = ("transition", "q", "policy")
+
+
+@dataclass
+class NetworkConfig:
+    """Sizes are those of the plain network; equivariant ones follow ``width_strategy``."""
+
+    group: str | None = None
+    width_strategy: str = "sqrt"
+    latent_dim: int = 64
+    hidden_dim: int = 256
+    hidden_layers: int = 2
+    activation: str = "mish"
+    num_q: int = 2
+    equivariant: dict[str, bool] = field(
+        default_factory=lambda: {name: True for name in COMPONENTS})
+
+    def __post_init__(self) -> None:
+        if self.width_strategy not in WIDTH_STRATEGIES:
+            raise ValueError(f"width_strategy={self.width_strategy!r}; valid: "
+                             f"{', '.join(WIDTH_STRATEGIES)}")
+        for name in ("latent_dim", "hidden_dim", "hidden_layers", "num_q"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        unknown = set(self.equivariant) - set(COMPONENTS)
+        if unknown:
+            raise ValueError(f"unknown components {sorted(unknown)}; valid: {', '.join(COMPONENTS)}")
+
+
+def regular_copies(width: int, group: AgentGroup, strategy: str) -> int:
+    """How many regular fields stand in for ``width`` plain channels."""
+    divisor = math.sqrt(group.order) if strategy == "sqrt" else group.order
+    return max(1, round(width / divisor))
+
+
+class FieldMLP(nn.Module):
+    """Linear -> LayerNorm -> activation blocks, then a linear output layer.
+
+    Plain when the layouts are sizes, equivariant when they are field types.
+    Takes and returns plain tensors [..., size].
+    """
+
+    def __init__(self, in_layout: Layout, hidden: list[Layout], out_layout: Layout,
+                 activation_name: str = "mish") -> None:
+        super().__init__()
+        layers, previous = [], in_layout
+        for layout in hidden:
+            layers += [make_linear(previous, layout), FieldLayerNorm(layout),
+                       activation(activation_name)]
+            previous = layout
+        layers.append(make_linear(previous, out_layout))
+        self.net = nn.Sequential(*layers)
+        self.in_layout, self.out_layout = in_layout, out_layout
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
+
+
+class Space:
+    """The layouts one component works with: plain sizes, or field types of a group."""
+
+    def __init__(self, symmetry: Symmetry, group: AgentGroup | None, config: NetworkConfig) -> None:
+        self.group, self.config = group, config
+        self.observation = self._declared(symmetry.observation)
+        self.action = self._declared(symmetry.action)
+        self.hidden = self.regular(config.hidden_dim)
+        self.latent = self.regular(config.latent_dim)
+        self.scalar = self.trivial(1)
+
+    def _declared(self, fields: tuple[Field, ...]) -> Layout:
+        if self.group is None:
+            return fields[-1].stop
+        return field_type(self.group, fields)
+
+    def regular(self, width: int) -> Layout:
+        if self.group is None:
+            return width
+        copies = regular_copies(width, self.group, self.config.width_strategy)
+        return self.group.gspace.type(*[self.group.regular] * copies)
+
+    def trivial(self, n: int) -> Layout:
+        return n if self.group is None else self.group.gspace.type(*[self.group.trivial] * n)
+
+    def mlp(self, in_layout: Layout, out_layout: Layout) -> FieldMLP:
+        return FieldMLP(in_layout, [self.hidden] * self.config.hidden_layers, out_layout,
+                        self.config.activation)
+
+
+def squash(x: torch.Tensor, fields: tuple[Field, ...]) -> torch.Tensor:
+    """Map R^n onto the action domain, equivariantly.
+
+    Each vector field is scaled by tanh(|x|)/|x| into the unit ball (a rotation
+    commutes with it, unlike an element-wise tanh, which only signed
+    permutations commute with); scalar fields go through tanh, which is odd and
+    so commutes with sign changes.
+    """
+    parts = []
+    for f in fields:
+        v = x[..., f.start:f.stop]
+        if f.size == 1:
+            parts.append(torch.tanh(v))
+        else:
+            norm = v.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+            parts.append(v * (torch.tanh(norm) / norm))
+    return torch.cat(parts, dim=-1)
+
+
+def squash_log_det(x: torch.Tensor, fields: tuple[Field, ...]) -> torch.Tensor:
+    """log |det d squash / dx|, summed over fields: for the policy's log-probability.
+
+    For a d-dim field x -> x tanh(r)/r has Jacobian determinant
+    (tanh(r)/r)^(d-1) (1 - tanh(r)^2), with r = |x|.
+    """
+    total = torch.zeros(x.shape[:-1], dtype=x.dtype, device=x.device)
+    for f in fields:
+        v = x[..., f.start:f.stop]
+        r = v.norm(dim=-1).clamp_min(1e-6)
+        log_sech2 = 2 * (math.log(2) - r - nn.functional.softplus(-2 * r))
+        total = total + log_sech2
+        if f.size > 1:
+            total = total + (f.size - 1) * (torch.log(torch.tanh(r)) - torch.log(r))
+    return total
+
+
+class PolicyHead(nn.Module):
+    """A Gaussian policy whose spread is one invariant scalar per action field.
+
+    The network outputs the mean (equivariant, in the action layout) and one log
+    standard deviation per action field (invariant); the sample is squashed
+    into the action domain by ``squash``.
+    """
+
+    def __init__(self, space: Space, action_fields: tuple[Field, ...],
+                 log_std_min: float = -10.0, log_std_max: float = 2.0) -> None:
+        super().__init__()
+        self.fields = action_fields
+        self.action_dim = action_fields[-1].stop
+        self.mlp = space.mlp(space.latent, concat(space.action, space.trivial(len(action_fields))))
+        sizes = torch.tensor([f.size for f in action_fields])
+        self.register_buffer("field_index",
+                             torch.repeat_interleave(torch.arange(len(action_fields)), sizes),
+                             persistent=False)
+        self.log_std_min, self.log_std_max = log_std_min, log_std_max
+
+    def forward(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(pre-squash mean, per-coordinate log std)."""
+        out = self.mlp(z)
+        mean, log_std = out[..., :self.action_dim], out[..., self.action_dim:]
+        log_std = self.log_std_min + (self.log_std_max - self.log_std_min) * torch.sigmoid(log_std)
+        return mean, log_std[..., self.field_index]
+
+
+@dataclass
+class Networks:
+    """The five networks of TD-MPC and what they were built from."""
+
+    encoder: FieldMLP
+    dynamics: FieldMLP
+    reward: FieldMLP
+    qs: nn.ModuleList
+    policy: PolicyHead
+    group: AgentGroup | None
+    exact: bool
+    config: NetworkConfig
+
+    def modules(self) -> dict[str, nn.Module]:
+        return {"encoder": self.encoder, "dynamics": self.dynamics, "reward": self.reward,
+                "qs": self.qs, "policy": self.policy}
+
+    def parameter_counts(self) -> dict[str, int]:
+        return {name: sum(p.numel() for p in m.parameters()) for name, m in self.modules().items()}
+
+
+def build_networks(symmetry: Symmetry, config: NetworkConfig) -> Networks:
+    """TD-MPC's networks for a task, equivariant to ``config.group`` where asked."""
+    group, exact = (None, True) if config.group in (None, "none") else \
+        group_for_task(config.group, symmetry)
+    use = {name: group is not None and config.equivariant.get(name, True) for name in COMPONENTS}
+    if (use["q"] or use["policy"]) and not use["transition"]:
+        raise ValueError("an equivariant Q or policy needs an equivariant latent state: "
+                         "make the transition (encoder, dynamics, reward) equivariant too")
+    spaces = {name: Space(symmetry, group if use[name] else None, config) for name in COMPONENTS}
+    latent = spaces["transition"].latent
+
+    def as_seen_by(name: str, layout: Layout) -> Layout:
+        """A plain component sees an equivariant layout as a plain vector."""
+        return layout if use[name] else layout_size(layout)
+
+    t, q, p = spaces["transition"], spaces["q"], spaces["policy"]
+    q.latent, p.latent = as_seen_by("q", latent), as_seen_by("policy", latent)
+    return Networks(
+        encoder=t.mlp(t.observation, latent),
+        dynamics=t.mlp(concat(latent, t.action), latent),
+        reward=t.mlp(concat(latent, t.action), t.scalar),
+        qs=nn.ModuleList(q.mlp(concat(q.latent, q.action), q.scalar) for _ in range(config.num_q)),
+        policy=PolicyHead(p, symmetry.action),
+        group=group, exact=exact, config=config,
+    )

@@ -1,0 +1,199 @@
+"""Equivariance of the networks built from the declarations, per group and per head."""
+
+import gymnasium
+import numpy as np
+import pytest
+import torch
+
+from agents import NetworkConfig, build_networks, group_for_task, make_group, squash
+from agents.layers import EquivariantLinear, FieldLayerNorm
+from agents.networks import squash_log_det
+from geomdp_envs import groups
+
+SMALL = dict(hidden_dim=24, latent_dim=16, hidden_layers=2)
+TASKS_2D = {"pointmass2d": ("GeoMDP/PointMass2D-v0", {}),
+            "reacher": ("GeoMDP/Reacher-v0", {})}
+TASK_3D = ("GeoMDP/PointMass3D-v0", {"n_balls": 2})
+
+
+def declaration(env_id, kwargs):
+    return gymnasium.make(env_id, **kwargs).unwrapped.symmetry
+
+
+def rep(layout, element):
+    return torch.as_tensor(np.asarray(layout.representation(element)), dtype=torch.float32)
+
+
+def elements_of(group, max_elements=16, seed=0):
+    elements = group.elements()
+    if len(elements) > max_elements:
+        idx = np.random.default_rng(seed).choice(len(elements), max_elements, replace=False)
+        elements = [elements[i] for i in idx]
+    return elements
+
+
+def relative_error(a, b):
+    return ((a - b).norm() / b.norm().clamp_min(1e-12)).item()
+
+
+CASES = [(g, "pointmass2d") for g in ("C4", "C8", "C16", "D4", "D8", "D16")] + \
+        [("D8", "reacher"), ("C8", "reacher")] + \
+        [(g, "pointmass3d") for g in ("octahedral", "icosahedral")]
+
+
+@pytest.mark.parametrize("group_name, task", CASES)
+@pytest.mark.parametrize("strategy", ["sqrt", "linear"])
+def test_every_network_is_equivariant_for_every_group_element(group_name, task, strategy):
+    sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
+    nets = build_networks(sym, NetworkConfig(group=group_name, width_strategy=strategy, **SMALL))
+    torch.manual_seed(0)
+    heads = {"encoder": nets.encoder, "dynamics": nets.dynamics, "reward": nets.reward,
+             "q0": nets.qs[0], "q1": nets.qs[1], "policy": nets.policy.mlp}
+    for name, net in heads.items():
+        x = torch.randn(32, net.in_layout.size)
+        y = net(x)
+        for e in elements_of(nets.group):
+            err = relative_error(net(x @ rep(net.in_layout, e).T), y @ rep(net.out_layout, e).T)
+            assert err < 1e-4, f"{name} not equivariant to {e}: relative error {err:.1e}"
+
+
+@pytest.mark.parametrize("group_name, task, outside", [
+    ("D4", "pointmass2d", groups.rotation_2d(np.pi / 4)),
+    ("D8", "reacher", groups.rotation_2d(np.pi / 8)),
+    ("C16", "pointmass2d", groups.rotation_2d(np.pi / 16)),
+    ("octahedral", "pointmass3d", groups.rotation_3d([1.0, 2.0, 3.0], 0.7)),
+    ("icosahedral", "pointmass3d", groups.rotation_3d([1.0, 2.0, 3.0], 0.7)),
+])
+def test_reward_is_invariant_inside_the_group_and_not_outside(group_name, task, outside):
+    """r(h(g.o), g.a) = r(h(o), a), through the declared observation and action maps."""
+    sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
+    nets = build_networks(sym, NetworkConfig(group=group_name, **SMALL))
+    torch.manual_seed(1)
+    obs, act = torch.randn(64, sym.observation_size), torch.randn(64, sym.action_size)
+
+    def reward(g):
+        o = torch.as_tensor(sym.transform_observation(obs.numpy(), g))
+        a = torch.as_tensor(sym.transform_action(act.numpy(), g))
+        return nets.reward(torch.cat([nets.encoder(o), a], -1))
+
+    base = reward(np.eye(sym.dim))
+    inside = max(relative_error(reward(nets.group.element_matrix(e)), base)
+                 for e in elements_of(nets.group))
+    assert inside < 1e-4
+    # The test can fail: outside the group the error is far above float noise
+    # (but small for C16, whose networks are smooth and nearly SO(2)-invariant).
+    assert relative_error(reward(outside), base) > 100 * max(inside, 1e-7)
+
+
+def test_declared_fields_become_the_matching_escnn_representations():
+    sym = declaration(*TASKS_2D["reacher"])
+    group, exact = group_for_task("D8", sym)
+    assert exact
+    nets = build_networks(sym, NetworkConfig(group="D8", **SMALL))
+    for e in group.elements():
+        g = group.element_matrix(e)
+        np.testing.assert_allclose(nets.encoder.in_layout.representation(e),
+                                   sym.observation_matrix(g), atol=1e-6)
+        np.testing.assert_allclose(nets.policy.mlp.out_layout.representation(e)[:2, :2],
+                                   sym.action_matrix(g), atol=1e-6)
+    # rotation-only groups treat the reflection-odd ("sign") fields as invariant
+    c8 = make_group("C8")
+    assert all(np.allclose(c8.representation("sign")(e), 1) for e in c8.elements())
+
+
+def test_exactness_and_bad_groups():
+    pm2 = declaration("GeoMDP/PointMass2D-v0", {})
+    assert group_for_task("D4", pm2)[1] and not group_for_task("D8", pm2)[1]
+    assert group_for_task("icosahedral", declaration(*TASK_3D))[1]
+    assert not group_for_task("icosahedral",
+                              declaration("GeoMDP/PointMass3D-v0", {"walls": True}))[1]
+    with pytest.raises(ValueError, match="acts in 3D but the task is 2D; valid groups for this "
+                                         "task: C4, C8, C16, D4, D8, D16"):
+        group_for_task("octahedral", pm2)
+    with pytest.raises(ValueError, match="acts in 2D but the task is 3D; valid groups for this "
+                                         "task: octahedral, icosahedral"):
+        group_for_task("D8", declaration(*TASK_3D))
+    with pytest.raises(ValueError, match="unknown group 'SO\\(5\\)'; valid groups for this 2D"):
+        group_for_task("SO(5)", pm2)
+    with pytest.raises(ValueError, match="equivariant latent"):
+        build_networks(pm2, NetworkConfig(group="D4", equivariant={"transition": False}, **SMALL))
+    with pytest.raises(ValueError, match="width_strategy='cube'; valid: sqrt, linear"):
+        NetworkConfig(width_strategy="cube")
+
+
+def test_plain_networks_have_the_same_interface_and_mix_with_equivariant_ones():
+    sym = declaration("GeoMDP/PointMass2D-v0", {})
+    plain = build_networks(sym, NetworkConfig(group=None, **SMALL))
+    assert all(isinstance(m, torch.nn.Linear) for m in plain.encoder.modules()
+               if isinstance(m, (torch.nn.Linear, EquivariantLinear)))
+    assert plain.encoder(torch.randn(5, 4)).shape == (5, 16)
+    mixed = build_networks(sym, NetworkConfig(group="D8", equivariant={"q": False}, **SMALL))
+    z = mixed.encoder(torch.randn(5, 4))
+    assert mixed.qs[0](torch.cat([z, torch.randn(5, 2)], -1)).shape == (5, 1)
+    assert not any(isinstance(m, EquivariantLinear) for m in mixed.qs.modules())
+
+
+def test_width_strategies_and_parameter_counts():
+    sym = declaration("GeoMDP/PointMass2D-v0", {})
+    cfg = dict(hidden_dim=128, latent_dim=32, hidden_layers=2)
+    plain = build_networks(sym, NetworkConfig(**cfg)).parameter_counts()
+    sqrt = build_networks(sym, NetworkConfig(group="D8", width_strategy="sqrt", **cfg))
+    linear = build_networks(sym, NetworkConfig(group="D8", width_strategy="linear", **cfg))
+    assert sqrt.encoder.net[0].out_type.size == round(128 / 4) * 16  # 32 copies of a 16-dim field
+    assert linear.encoder.net[0].out_type.size == 128  # 8 copies: the plain width
+    ratio_sqrt = sqrt.parameter_counts()["dynamics"] / plain["dynamics"]
+    ratio_linear = linear.parameter_counts()["dynamics"] / plain["dynamics"]
+    assert 0.5 < ratio_sqrt < 1.5  # about as many free parameters as the plain network
+    assert ratio_linear < 0.15  # about |G| = 16 times fewer
+
+
+def test_inference_form_equals_training_form_and_is_never_stale():
+    sym = declaration(*TASK_3D)
+    nets = build_networks(sym, NetworkConfig(group="octahedral", **SMALL))
+    net = nets.dynamics
+    x = torch.randn(16, net.in_layout.size)
+    trained = net(x)  # gradients on: escnn expands the weights in the graph
+    with torch.no_grad():
+        cached = net(x)
+        np.testing.assert_allclose(cached.numpy(), trained.detach().numpy(), atol=1e-6)
+    exported = torch.nn.Sequential(*[m.export() if isinstance(m, EquivariantLinear) else m
+                                     for m in net.net])
+    with torch.no_grad():
+        np.testing.assert_allclose(exported(x).numpy(), cached.numpy(), atol=1e-5)
+    # an optimiser step changes the parameters in place: the cache follows
+    optimizer = torch.optim.Adam(net.parameters(), lr=1e-2)
+    net(x).pow(2).sum().backward()
+    optimizer.step()
+    with torch.no_grad():
+        after = net(x)
+    np.testing.assert_allclose(after.numpy(), net(x).detach().numpy(), atol=1e-6)
+    assert (after - cached).abs().max() > 1e-4
+    # eval() does not change the state_dict keys
+    keys = set(net.state_dict())
+    net.eval()
+    assert set(net.state_dict()) == keys
+
+
+def test_field_layer_norm_is_layer_norm_on_plain_layouts():
+    torch.manual_seed(0)
+    ours, ref = FieldLayerNorm(10), torch.nn.LayerNorm(10)
+    x = torch.randn(4, 10)
+    torch.testing.assert_close(ours(x), ref(x))
+
+
+@pytest.mark.parametrize("group_name, task", [("D8", "pointmass2d"), ("icosahedral", "pointmass3d")])
+def test_policy_squash_keeps_vectors_in_the_unit_ball_and_is_equivariant(group_name, task):
+    sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
+    group = make_group(group_name)
+    x = 3 * torch.randn(256, sym.action_size, dtype=torch.float64)
+    a = squash(x, sym.action).numpy()
+    assert sym.action_in_domain(a).all()
+    for e in elements_of(group):
+        g = group.element_matrix(e)
+        moved = squash(torch.as_tensor(sym.transform_action(x.numpy(), g)), sym.action).numpy()
+        np.testing.assert_allclose(moved, sym.transform_action(a, g), atol=1e-12)
+    # the log-determinant matches autograd's Jacobian
+    x0 = torch.randn(sym.action_size, dtype=torch.float64)
+    jac = torch.autograd.functional.jacobian(lambda v: squash(v, sym.action), x0)
+    np.testing.assert_allclose(squash_log_det(x0, sym.action).item(),
+                               torch.linalg.slogdet(jac)[1].item(), atol=1e-9)
