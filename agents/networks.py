@@ -1,8 +1,9 @@
 """The networks of TD-MPC, plain or G-equivariant from one definition.
 
-``build_networks(symmetry, config)`` reads a task's symmetry declaration and
+``build_networks(config, symmetry)`` reads a task's symmetry declaration and
 builds the encoder, latent dynamics, reward, twin Q and policy. With
-``config.group = None`` every layout is a plain size and every network an MLP;
+``config.group = None`` every layout is a plain size and every network an MLP
+(and no declaration is needed: ``build_networks(config, None, obs_size, action_size)``);
 with a group, the observation and action layouts are the declared fields as
 escnn field types, hidden layers and the latent state are regular fields, and
 the same ``FieldMLP`` becomes equivariant (vector outputs) or invariant (scalar
@@ -96,10 +97,11 @@ class FieldMLP(nn.Module):
 class Space:
     """The layouts one component works with: plain sizes, or field types of a group."""
 
-    def __init__(self, symmetry: Symmetry, group: AgentGroup | None, config: NetworkConfig) -> None:
+    def __init__(self, observation: tuple[Field, ...], action: tuple[Field, ...],
+                 group: AgentGroup | None, config: NetworkConfig) -> None:
         self.group, self.config = group, config
-        self.observation = self._declared(symmetry.observation)
-        self.action = self._declared(symmetry.action)
+        self.observation = self._declared(observation)
+        self.action = self._declared(action)
         self.hidden = self.regular(config.hidden_dim)
         self.latent = self.regular(config.latent_dim)
         self.scalar = self.trivial(1)
@@ -142,49 +144,20 @@ def squash(x: torch.Tensor, fields: tuple[Field, ...]) -> torch.Tensor:
     return torch.cat(parts, dim=-1)
 
 
-def squash_log_det(x: torch.Tensor, fields: tuple[Field, ...]) -> torch.Tensor:
-    """log |det d squash / dx|, summed over fields: for the policy's log-probability.
+def project(x: torch.Tensor, fields: tuple[Field, ...]) -> torch.Tensor:
+    """The nearest point of the action domain: vector fields longer than 1 are
+    scaled back onto the unit sphere, scalar fields clipped to [-1, 1].
 
-    For a d-dim field x -> x tanh(r)/r has Jacobian determinant
-    (tanh(r)/r)^(d-1) (1 - tanh(r)^2), with r = |x|.
+    The equivariant counterpart of clamping each coordinate to [-1, 1].
     """
-    total = torch.zeros(x.shape[:-1], dtype=x.dtype, device=x.device)
+    parts = []
     for f in fields:
         v = x[..., f.start:f.stop]
-        r = v.norm(dim=-1).clamp_min(1e-6)
-        log_sech2 = 2 * (math.log(2) - r - nn.functional.softplus(-2 * r))
-        total = total + log_sech2
-        if f.size > 1:
-            total = total + (f.size - 1) * (torch.log(torch.tanh(r)) - torch.log(r))
-    return total
-
-
-class PolicyHead(nn.Module):
-    """A Gaussian policy whose spread is one invariant scalar per action field.
-
-    The network outputs the mean (equivariant, in the action layout) and one log
-    standard deviation per action field (invariant); the sample is squashed
-    into the action domain by ``squash``.
-    """
-
-    def __init__(self, space: Space, action_fields: tuple[Field, ...],
-                 log_std_min: float = -10.0, log_std_max: float = 2.0) -> None:
-        super().__init__()
-        self.fields = action_fields
-        self.action_dim = action_fields[-1].stop
-        self.mlp = space.mlp(space.latent, concat(space.action, space.trivial(len(action_fields))))
-        sizes = torch.tensor([f.size for f in action_fields])
-        self.register_buffer("field_index",
-                             torch.repeat_interleave(torch.arange(len(action_fields)), sizes),
-                             persistent=False)
-        self.log_std_min, self.log_std_max = log_std_min, log_std_max
-
-    def forward(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(pre-squash mean, per-coordinate log std)."""
-        out = self.mlp(z)
-        mean, log_std = out[..., :self.action_dim], out[..., self.action_dim:]
-        log_std = self.log_std_min + (self.log_std_max - self.log_std_min) * torch.sigmoid(log_std)
-        return mean, log_std[..., self.field_index]
+        if f.size == 1:
+            parts.append(v.clamp(-1, 1))
+        else:
+            parts.append(v / v.norm(dim=-1, keepdim=True).clamp_min(1.0))
+    return torch.cat(parts, dim=-1)
 
 
 @dataclass
@@ -195,10 +168,11 @@ class Networks:
     dynamics: FieldMLP
     reward: FieldMLP
     qs: nn.ModuleList
-    policy: PolicyHead
+    policy: FieldMLP
     group: AgentGroup | None
     exact: bool
     config: NetworkConfig
+    action_fields: tuple[Field, ...]  # the declared ones with a group, scalars without
 
     def modules(self) -> dict[str, nn.Module]:
         return {"encoder": self.encoder, "dynamics": self.dynamics, "reward": self.reward,
@@ -208,15 +182,33 @@ class Networks:
         return {name: sum(p.numel() for p in m.parameters()) for name, m in self.modules().items()}
 
 
-def build_networks(symmetry: Symmetry, config: NetworkConfig) -> Networks:
-    """TD-MPC's networks for a task, equivariant to ``config.group`` where asked."""
-    group, exact = (None, True) if config.group in (None, "none") else \
-        group_for_task(config.group, symmetry)
+def plain_fields(size: int) -> tuple[Field, ...]:
+    """``size`` scalar fields: a vector seen without any group action (box actions)."""
+    return tuple(Field(f"x{i}", "trivial", i, i + 1) for i in range(size))
+
+
+def build_networks(config: NetworkConfig, symmetry: Symmetry | None,
+                   observation_size: int | None = None, action_size: int | None = None) -> Networks:
+    """TD-MPC's networks for a task, equivariant to ``config.group`` where asked.
+
+    A plain agent needs no declaration: pass ``symmetry=None`` and the sizes.
+    """
+    if config.group in (None, "none"):
+        group, exact = None, True
+        observation = plain_fields(observation_size or symmetry.observation_size)
+        action = plain_fields(action_size or symmetry.action_size)
+    elif symmetry is None:
+        raise ValueError(f"group {config.group} needs a task that declares its symmetry "
+                         "(a GeoMDP task); use group=none for other environments")
+    else:
+        group, exact = group_for_task(config.group, symmetry)
+        observation, action = symmetry.observation, symmetry.action
     use = {name: group is not None and config.equivariant.get(name, True) for name in COMPONENTS}
     if (use["q"] or use["policy"]) and not use["transition"]:
         raise ValueError("an equivariant Q or policy needs an equivariant latent state: "
                          "make the transition (encoder, dynamics, reward) equivariant too")
-    spaces = {name: Space(symmetry, group if use[name] else None, config) for name in COMPONENTS}
+    spaces = {name: Space(observation, action, group if use[name] else None, config)
+              for name in COMPONENTS}
     latent = spaces["transition"].latent
 
     def as_seen_by(name: str, layout: Layout) -> Layout:
@@ -230,6 +222,6 @@ def build_networks(symmetry: Symmetry, config: NetworkConfig) -> Networks:
         dynamics=t.mlp(concat(latent, t.action), latent),
         reward=t.mlp(concat(latent, t.action), t.scalar),
         qs=nn.ModuleList(q.mlp(concat(q.latent, q.action), q.scalar) for _ in range(config.num_q)),
-        policy=PolicyHead(p, symmetry.action),
-        group=group, exact=exact, config=config,
+        policy=p.mlp(p.latent, p.action),
+        group=group, exact=exact, config=config, action_fields=action,
     )

@@ -90,12 +90,12 @@ def main() -> None:
         sym = gymnasium.make(TASKS[dim][0], **TASKS[dim][1]).unwrapped.symmetry
         if dim not in plain_cache:
             cfg = NetworkConfig(hidden_dim=args.width, latent_dim=args.latent)
-            plain_cache[dim] = measure(build_networks(sym, cfg).dynamics)
+            plain_cache[dim] = measure(build_networks(cfg, sym).dynamics)
         plain = plain_cache[dim]
         for strategy in ("sqrt", "linear"):
             cfg = NetworkConfig(group=group, width_strategy=strategy, hidden_dim=args.width,
                                 latent_dim=args.latent)
-            eq = measure(build_networks(sym, cfg).dynamics)
+            eq = measure(build_networks(cfg, sym).dynamics)
             print(f"| {group} | {strategy} | {eq['hidden']} (plain {plain['hidden']}) "
                   f"| {eq['params']:,} ({eq['params'] / plain['params']:.2f}) "
                   f"| {eq['train'] * 1e3:.2f} ms ({eq['train'] / plain['train']:.1f}) "

@@ -7,7 +7,7 @@ import torch
 
 from agents import NetworkConfig, build_networks, group_for_task, make_group, squash
 from agents.layers import EquivariantLinear, FieldLayerNorm
-from agents.networks import squash_log_det
+from agents.networks import project
 from geomdp_envs import groups
 
 SMALL = dict(hidden_dim=24, latent_dim=16, hidden_layers=2)
@@ -45,10 +45,10 @@ CASES = [(g, "pointmass2d") for g in ("C4", "C8", "C16", "D4", "D8", "D16")] + \
 @pytest.mark.parametrize("strategy", ["sqrt", "linear"])
 def test_every_network_is_equivariant_for_every_group_element(group_name, task, strategy):
     sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
-    nets = build_networks(sym, NetworkConfig(group=group_name, width_strategy=strategy, **SMALL))
+    nets = build_networks(NetworkConfig(group=group_name, width_strategy=strategy, **SMALL), sym)
     torch.manual_seed(0)
     heads = {"encoder": nets.encoder, "dynamics": nets.dynamics, "reward": nets.reward,
-             "q0": nets.qs[0], "q1": nets.qs[1], "policy": nets.policy.mlp}
+             "q0": nets.qs[0], "q1": nets.qs[1], "policy": nets.policy}
     for name, net in heads.items():
         x = torch.randn(32, net.in_layout.size)
         y = net(x)
@@ -67,7 +67,7 @@ def test_every_network_is_equivariant_for_every_group_element(group_name, task, 
 def test_reward_is_invariant_inside_the_group_and_not_outside(group_name, task, outside):
     """r(h(g.o), g.a) = r(h(o), a), through the declared observation and action maps."""
     sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
-    nets = build_networks(sym, NetworkConfig(group=group_name, **SMALL))
+    nets = build_networks(NetworkConfig(group=group_name, **SMALL), sym)
     torch.manual_seed(1)
     obs, act = torch.randn(64, sym.observation_size), torch.randn(64, sym.action_size)
 
@@ -89,12 +89,12 @@ def test_declared_fields_become_the_matching_escnn_representations():
     sym = declaration(*TASKS_2D["reacher"])
     group, exact = group_for_task("D8", sym)
     assert exact
-    nets = build_networks(sym, NetworkConfig(group="D8", **SMALL))
+    nets = build_networks(NetworkConfig(group="D8", **SMALL), sym)
     for e in group.elements():
         g = group.element_matrix(e)
         np.testing.assert_allclose(nets.encoder.in_layout.representation(e),
                                    sym.observation_matrix(g), atol=1e-6)
-        np.testing.assert_allclose(nets.policy.mlp.out_layout.representation(e)[:2, :2],
+        np.testing.assert_allclose(nets.policy.out_layout.representation(e),
                                    sym.action_matrix(g), atol=1e-6)
     # rotation-only groups treat the reflection-odd ("sign") fields as invariant
     c8 = make_group("C8")
@@ -116,18 +116,18 @@ def test_exactness_and_bad_groups():
     with pytest.raises(ValueError, match="unknown group 'SO\\(5\\)'; valid groups for this 2D"):
         group_for_task("SO(5)", pm2)
     with pytest.raises(ValueError, match="equivariant latent"):
-        build_networks(pm2, NetworkConfig(group="D4", equivariant={"transition": False}, **SMALL))
+        build_networks(NetworkConfig(group="D4", equivariant={"transition": False}, **SMALL), pm2)
     with pytest.raises(ValueError, match="width_strategy='cube'; valid: sqrt, linear"):
         NetworkConfig(width_strategy="cube")
 
 
 def test_plain_networks_have_the_same_interface_and_mix_with_equivariant_ones():
     sym = declaration("GeoMDP/PointMass2D-v0", {})
-    plain = build_networks(sym, NetworkConfig(group=None, **SMALL))
+    plain = build_networks(NetworkConfig(group=None, **SMALL), sym)
     assert all(isinstance(m, torch.nn.Linear) for m in plain.encoder.modules()
                if isinstance(m, (torch.nn.Linear, EquivariantLinear)))
     assert plain.encoder(torch.randn(5, 4)).shape == (5, 16)
-    mixed = build_networks(sym, NetworkConfig(group="D8", equivariant={"q": False}, **SMALL))
+    mixed = build_networks(NetworkConfig(group="D8", equivariant={"q": False}, **SMALL), sym)
     z = mixed.encoder(torch.randn(5, 4))
     assert mixed.qs[0](torch.cat([z, torch.randn(5, 2)], -1)).shape == (5, 1)
     assert not any(isinstance(m, EquivariantLinear) for m in mixed.qs.modules())
@@ -136,9 +136,9 @@ def test_plain_networks_have_the_same_interface_and_mix_with_equivariant_ones():
 def test_width_strategies_and_parameter_counts():
     sym = declaration("GeoMDP/PointMass2D-v0", {})
     cfg = dict(hidden_dim=128, latent_dim=32, hidden_layers=2)
-    plain = build_networks(sym, NetworkConfig(**cfg)).parameter_counts()
-    sqrt = build_networks(sym, NetworkConfig(group="D8", width_strategy="sqrt", **cfg))
-    linear = build_networks(sym, NetworkConfig(group="D8", width_strategy="linear", **cfg))
+    plain = build_networks(NetworkConfig(**cfg), sym).parameter_counts()
+    sqrt = build_networks(NetworkConfig(group="D8", width_strategy="sqrt", **cfg), sym)
+    linear = build_networks(NetworkConfig(group="D8", width_strategy="linear", **cfg), sym)
     assert sqrt.encoder.net[0].out_type.size == round(128 / 4) * 16  # 32 copies of a 16-dim field
     assert linear.encoder.net[0].out_type.size == 128  # 8 copies: the plain width
     ratio_sqrt = sqrt.parameter_counts()["dynamics"] / plain["dynamics"]
@@ -149,7 +149,7 @@ def test_width_strategies_and_parameter_counts():
 
 def test_inference_form_equals_training_form_and_is_never_stale():
     sym = declaration(*TASK_3D)
-    nets = build_networks(sym, NetworkConfig(group="octahedral", **SMALL))
+    nets = build_networks(NetworkConfig(group="octahedral", **SMALL), sym)
     net = nets.dynamics
     x = torch.randn(16, net.in_layout.size)
     trained = net(x)  # gradients on: escnn expands the weights in the graph
@@ -192,8 +192,10 @@ def test_policy_squash_keeps_vectors_in_the_unit_ball_and_is_equivariant(group_n
         g = group.element_matrix(e)
         moved = squash(torch.as_tensor(sym.transform_action(x.numpy(), g)), sym.action).numpy()
         np.testing.assert_allclose(moved, sym.transform_action(a, g), atol=1e-12)
-    # the log-determinant matches autograd's Jacobian
-    x0 = torch.randn(sym.action_size, dtype=torch.float64)
-    jac = torch.autograd.functional.jacobian(lambda v: squash(v, sym.action), x0)
-    np.testing.assert_allclose(squash_log_det(x0, sym.action).item(),
-                               torch.linalg.slogdet(jac)[1].item(), atol=1e-9)
+    # projection onto the domain: identity inside, equivariant, and never outside
+    p = project(x, sym.action).numpy()
+    assert sym.action_in_domain(p).all()
+    np.testing.assert_allclose(project(torch.as_tensor(a), sym.action).numpy(), a)
+    g = group.element_matrix(elements_of(group)[-1])
+    np.testing.assert_allclose(project(torch.as_tensor(sym.transform_action(x.numpy(), g)),
+                                       sym.action).numpy(), sym.transform_action(p, g), atol=1e-12)

@@ -1,0 +1,116 @@
+"""TD-MPC's objective as a TorchRL ``LossModule``, with a target model for ``SoftUpdate``.
+
+For a batch of horizon-length slices (obs_0, a_0, r_0, obs_1, ..., obs_H) it
+unrolls the latent dynamics from h(obs_0) and sums, weighted by rho^t:
+
+* latent consistency: |d(z_t, a_t) - h_target(obs_{t+1})|^2 (mean over latent),
+* reward: |R(z_t, a_t) - r_t|^2,
+* value: sum_i |Q_i(z_t, a_t) - (r_t + gamma (1 - terminated) min_j Q_target_j(z', pi(z')))|^2
+  with z' = h(obs_{t+1}),
+* policy: -min_i Q_i(z_t, pi(z_t) + noise) on detached latents, with Q's parameters
+  detached, so this term trains the policy only.
+
+Model terms are weighted by the replay's importance weights and scaled by
+1/H as in TD-MPC. Unlike TD-MPC, which steps the model's optimiser before
+computing the policy loss, both are computed in one pass (TorchRL's usual
+single backward); the policy then sees the Q of before the step.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictParams
+from torchrl.objectives import LossModule
+
+from agents.world_model import WorldModel
+
+
+@dataclass
+class LossConfig:
+    """TD-MPC's loss coefficients (its defaults)."""
+
+    consistency_coef: float = 2.0
+    reward_coef: float = 0.5
+    value_coef: float = 0.1
+    rho: float = 0.5
+    discount: float = 0.99
+    policy_noise: float = 0.05  # TD-MPC's min_std, added to pi in the TD target and pi loss
+
+
+class TDMPCLoss(LossModule):
+    """TD-MPC's losses over a [batch, horizon] TensorDict of transitions.
+
+    Expected keys: ``observation``, ``action``, ``("next", "observation")``,
+    ``("next", "reward")``, ``("next", "terminated")``, and optionally
+    ``priority_weight`` (importance weights from prioritised replay).
+    """
+
+    def __init__(self, model: WorldModel, config: LossConfig) -> None:
+        super().__init__()
+        self.model, self.config = model, config
+        self.target_model = copy.deepcopy(model).requires_grad_(False)
+        # What TorchRL's SoftUpdate looks for: "<name>_params" and "target_<name>_params".
+        self.model_params = TensorDict.from_module(model)
+        self.target_model_params = TensorDictParams(
+            TensorDict.from_module(self.target_model), no_convert=True)
+        self._has_update_associated["model"] = False  # until SoftUpdate registers itself
+
+    def forward(self, batch: TensorDictBase) -> TensorDict:
+        cfg, model = self.config, self.model
+        obs, action = batch["observation"], batch["action"]
+        next_obs, reward = batch["next", "observation"], batch["next", "reward"]
+        not_done = 1.0 - batch["next", "terminated"].to(obs.dtype)
+        horizon = obs.shape[1]
+        weights = (batch["priority_weight"][:, 0] if "priority_weight" in batch.keys()
+                   else torch.ones(obs.shape[0], device=obs.device))
+
+        with torch.no_grad():
+            z_next = model.encode(next_obs)
+            target_z = self.target_model.encode(next_obs)
+            next_action = model.pi(z_next, cfg.policy_noise, torch.randn(
+                *z_next.shape[:-1], model.action_dim, dtype=z_next.dtype, device=z_next.device))
+            target_q = self.target_model.q(z_next, next_action).min(dim=0).values
+            td_target = reward + cfg.discount * not_done * target_q
+
+        z = model.encode(obs[:, 0])
+        latents = []
+        consistency = reward_loss = value_loss = priority = 0.0
+        for t in range(horizon):
+            latents.append(z.detach())
+            q = model.q(z, action[:, t])
+            reward_pred = model.reward(z, action[:, t])
+            z = model.next(z, action[:, t])
+            rho = cfg.rho ** t
+            consistency = consistency + rho * F.mse_loss(z, target_z[:, t], reduction="none").mean(-1)
+            reward_loss = reward_loss + rho * F.mse_loss(reward_pred, reward[:, t],
+                                                         reduction="none").squeeze(-1)
+            value_loss = value_loss + rho * F.mse_loss(
+                q, td_target[:, t].expand_as(q), reduction="none").sum(0).squeeze(-1)
+            priority = priority + rho * (q - td_target[:, t]).abs().sum(0).squeeze(-1)
+
+        model_loss = (cfg.consistency_coef * consistency + cfg.reward_coef * reward_loss
+                      + cfg.value_coef * value_loss)
+        return TensorDict({
+            "loss_model": (model_loss * weights).mean() / horizon,
+            "loss_pi": self.policy_loss(torch.stack(latents, dim=1)),
+            "consistency": consistency.mean().detach(),
+            "reward_error": reward_loss.mean().detach(),
+            "value_error": value_loss.mean().detach(),
+            "priority": priority.detach(),
+        }, batch_size=[])
+
+    def policy_loss(self, latents: torch.Tensor) -> torch.Tensor:
+        """-sum_t rho^t mean_batch min Q(z_t, pi(z_t)); trains pi only."""
+        noise = torch.randn(*latents.shape[:-1], self.model.action_dim, dtype=latents.dtype,
+                            device=latents.device)
+        action = self.model.pi(latents, self.config.policy_noise, noise)
+        frozen_q = TensorDict.from_module(self.model.qs).detach()
+        with frozen_q.to_module(self.model.qs):
+            q = self.model.q(latents, action).min(dim=0).values.squeeze(-1)
+        rho = self.config.rho ** torch.arange(latents.shape[1], device=latents.device)
+        return -(q.mean(0) * rho).sum()

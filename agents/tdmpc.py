@@ -1,0 +1,146 @@
+"""The TD-MPC agent: world model, planner, loss, target updates and optimisers."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+from torchrl.objectives import SoftUpdate
+
+from agents.loss import LossConfig, TDMPCLoss
+from agents.networks import NetworkConfig, build_networks
+from agents.planner import MPPIPlanner, NoiseSource, PlannerConfig
+from agents.replay import ReplayConfig
+from agents.world_model import WorldModel
+from geomdp_envs.symmetry import Symmetry
+
+
+@dataclass
+class Schedule:
+    """Linear interpolation from ``start`` to ``end`` over ``steps`` agent steps."""
+
+    start: float
+    end: float
+    steps: int
+
+    def __call__(self, step: int) -> float:
+        if self.steps <= 0:
+            return self.end
+        mix = min(max(step / self.steps, 0.0), 1.0)
+        return self.start + mix * (self.end - self.start)
+
+
+@dataclass
+class TDMPCConfig:
+    """TD-MPC's hyperparameters (Hansen et al. 2022 defaults unless a preset says otherwise)."""
+
+    networks: NetworkConfig = field(default_factory=NetworkConfig)
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    loss: LossConfig = field(default_factory=LossConfig)
+    replay: ReplayConfig = field(default_factory=ReplayConfig)
+    horizon: int = 5
+    horizon_schedule: int = 25_000  # agent steps to grow the planning horizon from 1 to H
+    std_schedule: Schedule = field(default_factory=lambda: Schedule(0.5, 0.05, 25_000))
+    lr: float = 1e-3
+    batch_size: int = 512
+    tau: float = 0.01
+    target_update_every: int = 2
+    grad_clip_norm: float = 10.0
+
+    def __post_init__(self) -> None:
+        for name in ("horizon", "batch_size", "target_update_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"agent.{name} must be >= 1, got {getattr(self, name)}")
+        if not 0 < self.tau <= 1:
+            raise ValueError(f"agent.tau must be in (0, 1], got {self.tau}")
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TDMPCConfig:
+        """Build from nested plain data (a Hydra config), refusing unknown keys."""
+        nested = {"networks": NetworkConfig, "planner": PlannerConfig, "loss": LossConfig,
+                  "replay": ReplayConfig, "std_schedule": Schedule}
+        kwargs = {}
+        for key, value in data.items():
+            if key not in {f.name for f in dataclasses.fields(cls)}:
+                raise ValueError(f"unknown agent option {key!r}; valid: "
+                                 + ", ".join(f.name for f in dataclasses.fields(cls)))
+            if key in nested:
+                valid = {f.name for f in dataclasses.fields(nested[key])}
+                unknown = set(value) - valid
+                if unknown:
+                    raise ValueError(f"unknown agent.{key} option(s) {sorted(unknown)}; valid: "
+                                     + ", ".join(sorted(valid)))
+                value = nested[key](**value)
+            kwargs[key] = value
+        return cls(**kwargs)
+
+
+class TDMPCAgent:
+    """Acts by planning with the world model; learns from replayed slices."""
+
+    def __init__(self, config: TDMPCConfig, symmetry: Symmetry | None,
+                 observation_size: int, action_size: int,
+                 device: torch.device | str = "cpu", seed: int = 0) -> None:
+        self.config, self.device = config, torch.device(device)
+        self.networks = build_networks(config.networks, symmetry, observation_size, action_size)
+        self.action_fields = self.networks.action_fields
+        self.model = WorldModel(self.networks, self.action_fields).to(self.device)
+        self.loss = TDMPCLoss(self.model, config.loss).to(self.device)
+        self.target_updater = SoftUpdate(self.loss, tau=config.tau)
+        policy_params = list(self.model.policy.parameters())
+        policy_ids = {id(p) for p in policy_params}
+        self.model_optimizer = torch.optim.Adam(
+            [p for p in self.model.parameters() if id(p) not in policy_ids], lr=config.lr)
+        self.policy_optimizer = torch.optim.Adam(policy_params, lr=config.lr)
+        self.planner = MPPIPlanner(self.model, config.planner)
+        self.generator = torch.Generator().manual_seed(seed)
+        self.noise = NoiseSource(self.generator)
+        self.updates = 0
+
+    def horizon(self, step: int) -> int:
+        return int(round(Schedule(1, self.config.horizon, self.config.horizon_schedule)(step)))
+
+    def act(self, obs: torch.Tensor, step: int, explore: bool) -> torch.Tensor:
+        """Plan an action for ``obs``; ``step`` (agent steps) drives the schedules."""
+        obs = obs.to(self.device, torch.float32)
+        return self.planner.plan(obs, horizon=self.horizon(step),
+                                 min_std=self.config.std_schedule(step), explore=explore,
+                                 noise=self.noise)
+
+    def update(self, batch: TensorDictBase) -> dict[str, float]:
+        """One gradient step on a [batch, horizon] TensorDict; returns losses and the priority."""
+        losses = self.loss(batch.to(self.device))
+        self.model_optimizer.zero_grad(set_to_none=True)
+        self.policy_optimizer.zero_grad(set_to_none=True)
+        (losses["loss_model"] + losses["loss_pi"]).backward()
+        clip = self.config.grad_clip_norm
+        model_grad = torch.nn.utils.clip_grad_norm_(
+            [p for g in self.model_optimizer.param_groups for p in g["params"]], clip)
+        policy_grad = torch.nn.utils.clip_grad_norm_(self.model.policy.parameters(), clip)
+        self.model_optimizer.step()
+        self.policy_optimizer.step()
+        self.updates += 1
+        if self.updates % self.config.target_update_every == 0:
+            self.target_updater.step()
+        metrics = {k: float(losses[k].detach()) for k in ("loss_model", "loss_pi", "consistency",
+                                                  "reward_error", "value_error")}
+        metrics.update(model_grad_norm=float(model_grad), policy_grad_norm=float(policy_grad))
+        self.last_priority = losses["priority"]
+        return metrics
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"loss": self.loss.state_dict(),
+                "model_optimizer": self.model_optimizer.state_dict(),
+                "policy_optimizer": self.policy_optimizer.state_dict(),
+                "generator": self.generator.get_state(), "updates": self.updates}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.loss.load_state_dict(state["loss"])
+        self.model_optimizer.load_state_dict(state["model_optimizer"])
+        self.policy_optimizer.load_state_dict(state["policy_optimizer"])
+        self.generator.set_state(state["generator"])
+        self.updates = state["updates"]
+        self.planner.reset()

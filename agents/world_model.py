@@ -1,0 +1,52 @@
+"""TD-MPC's task-oriented latent dynamics model (TOLD), over plain or equivariant networks."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from agents.networks import Networks, project, squash
+from geomdp_envs.symmetry import Field
+
+
+class WorldModel(nn.Module):
+    """Encoder h, latent dynamics d, reward R, Q ensemble and policy pi.
+
+    Equivariance is a property of the networks it is given; the model itself
+    only adds TD-MPC's action handling, in the equivariant form: the policy's
+    output is squashed into the action domain by ``squash`` (unit ball per
+    vector field), and exploration noise is isotropic per vector field,
+    projected back onto the domain.
+    """
+
+    def __init__(self, networks: Networks, action_fields: tuple[Field, ...]) -> None:
+        super().__init__()
+        self.encoder = networks.encoder
+        self.dynamics = networks.dynamics
+        self.reward_net = networks.reward
+        self.qs = networks.qs
+        self.policy = networks.policy
+        self.action_fields = action_fields
+        self.action_dim = action_fields[-1].stop
+
+    def encode(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.encoder(obs)
+
+    def next(self, z: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return self.dynamics(torch.cat([z, action], dim=-1))
+
+    def reward(self, z: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return self.reward_net(torch.cat([z, action], dim=-1))
+
+    def q(self, z: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """All Q estimates, stacked: [num_q, ..., 1]."""
+        za = torch.cat([z, action], dim=-1)
+        return torch.stack([q(za) for q in self.qs])
+
+    def pi(self, z: torch.Tensor, std: float = 0.0,
+           noise: torch.Tensor | None = None) -> torch.Tensor:
+        """The policy's action, plus ``std`` times ``noise`` (standard normal) if given."""
+        mean = squash(self.policy(z), self.action_fields)
+        if std <= 0 or noise is None:
+            return mean
+        return project(mean + std * noise, self.action_fields)

@@ -1,0 +1,135 @@
+"""geomdp-train: smoke run, determinism, resume, and bad input."""
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from hydra import compose, initialize_config_dir
+
+from agents.train import CONFIG_DIR, run
+
+# A run small enough for CI: 250-step episodes, a tiny agent.
+TINY = ["env.action_repeat=4", "train.steps=2000", "train.seed_steps=1000",
+        "train.eval_every=1000", "train.eval_episodes=1", "train.progress=false",
+        "agent.networks.hidden_dim=16", "agent.networks.latent_dim=8",
+        "agent.planner.num_samples=16", "agent.planner.num_elites=4",
+        "agent.planner.num_pi_trajs=2", "agent.planner.iterations=1", "agent.horizon=3",
+        "agent.batch_size=8", "agent.replay.capacity=5000", "logger.tensorboard=false"]
+TRAIN = [sys.executable, "-c", "from agents.train import main; main()"]
+
+
+def config(*overrides):
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        return compose("train", overrides=[*TINY, *overrides])
+
+
+def rows(path, drop=("wall_time", "steps_per_second")):
+    with open(path, newline="") as f:
+        return [{k: v for k, v in r.items() if k not in drop} for r in csv.DictReader(f)]
+
+
+def test_smoke_run_writes_everything(tmp_path):
+    assert run(config("agent.group=D4"), tmp_path) == 0
+    for name in ("config.yaml", "eval.csv", "train.csv", "checkpoint/agent.pt",
+                 "checkpoint/state.json", "torchrl_csv"):
+        assert (tmp_path / name).exists(), name
+    evals = rows(tmp_path / "eval.csv")
+    assert [int(r["env_step"]) for r in evals] == [0, 1000, 2000]
+    train = rows(tmp_path / "train.csv")
+    assert train[-1]["updates"] == "250" and float(train[-1]["loss_model"]) > 0
+    assert json.loads((tmp_path / "checkpoint/state.json").read_text())["env_step"] == 2000
+
+
+def test_same_seed_gives_the_same_eval_csv(tmp_path):
+    for d in ("a", "b"):
+        assert run(config("seed=3"), tmp_path / d) == 0
+    assert rows(tmp_path / "a/eval.csv") == rows(tmp_path / "b/eval.csv")
+    assert rows(tmp_path / "a/train.csv") == rows(tmp_path / "b/train.csv")
+
+
+def test_interrupted_run_resumes_to_the_same_result(tmp_path):
+    """Kill a run after its first checkpoint; the same command finishes it, and the
+    logs equal those of an uninterrupted run."""
+    args = [*TINY, "train.steps=3000", f"hydra.run.dir={tmp_path / 'resumed'}"]
+    proc = subprocess.Popen([*TRAIN, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    state = tmp_path / "resumed/checkpoint/state.json"
+    deadline = time.time() + 120
+    while not (state.exists() and json.loads(state.read_text())["env_step"] >= 1000):
+        assert proc.poll() is None and time.time() < deadline, proc.communicate()
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and "run the same command to continue" in err
+    finished = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300)
+    assert finished.returncode == 0, finished.stderr
+    assert "resuming" in finished.stdout
+    assert run(config("train.steps=3000"), tmp_path / "straight") == 0
+    for table in ("eval.csv", "train.csv"):
+        assert rows(tmp_path / "resumed" / table) == rows(tmp_path / "straight" / table), table
+
+
+def test_corrupted_checkpoint_is_reported_and_kept(tmp_path, capsys):
+    assert run(config(), tmp_path) == 0
+    agent_file = tmp_path / "checkpoint/agent.pt"
+    agent_file.write_bytes(b"not a checkpoint")
+    assert run(config("train.steps=3000"), tmp_path) == 2
+    assert "is corrupted" in capsys.readouterr().err
+    assert agent_file.read_bytes() == b"not a checkpoint"  # never overwritten
+
+
+def test_changed_options_are_refused_on_resume(tmp_path, capsys):
+    assert run(config(), tmp_path) == 0
+    assert run(config("agent.group=D8"), tmp_path) == 2
+    assert "agent.group: 'none' -> 'D8'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["env=CartPoleX-v9"], "unknown environment 'CartPoleX-v9'"),
+    (["agent.group=Q8"], "unknown group 'Q8'; valid groups for this 2D task: C4, C8"),
+    (["agent.group=icosahedral"], "acts in 3D but the task is 2D"),
+    (["env=reacher", "agent.group=octahedral"], "acts in 3D but the task is 2D"),
+    (["env=pointmass3d", "agent.group=D8"], "acts in 2D but the task is 3D"),
+    (["env=Pendulum-v1", "agent.group=D4"], "needs a task that declares its symmetry"),
+    (["train.steps=0"], "train.steps must be a positive integer"),
+    (["env=pointmass3d", "env.n_balls=0"], "n_balls must be an integer >= 1"),
+    (["env=reacher", "env.frame=body"], "frame='body'; valid: 'local', 'global'"),
+    (["agent.width_strategy=cube"], "width_strategy='cube'; valid: sqrt, linear"),
+    (["+agent.planner.samples=3"], "unknown agent.planner option"),
+])
+def test_bad_input_fails_fast_with_one_clear_line(overrides, message, tmp_path):
+    start = time.time()
+    out = subprocess.run([*TRAIN, *TINY, *overrides, f"hydra.run.dir={tmp_path}"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode != 0
+    errors = [line for line in out.stderr.splitlines() if line.startswith("geomdp-train: error")]
+    assert len(errors) == 1 and message in errors[0], out.stderr
+    assert not (tmp_path / "checkpoint").exists()
+    assert time.time() - start < 60
+
+
+def test_approximate_group_warns_once_and_trains(tmp_path):
+    with pytest.warns(UserWarning, match="D8 is only an approximate symmetry") as record:
+        assert run(config("agent.group=D8", "train.steps=1000"), tmp_path) == 0
+    assert sum("approximate" in str(w.message) for w in record) == 1
+
+
+def test_plain_agent_on_any_gymnasium_env(tmp_path):
+    out = subprocess.run([*TRAIN, *TINY, "env=Pendulum-v1", "train.steps=400",
+                          "train.seed_steps=200", "train.eval_every=400",
+                          f"hydra.run.dir={tmp_path}"], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert [int(r["env_step"]) for r in rows(tmp_path / "eval.csv")] == [0, 400]
+    # Pendulum's episodes last 200 steps (action_repeat 4 applies: 50 agent steps)
+    assert float(rows(tmp_path / "eval.csv")[-1]["episode_reward"]) < 0
+
+
+@pytest.mark.skipif(not os.environ.get("GEOMDP_TEST_CUDA"), reason="set GEOMDP_TEST_CUDA=1 on a GPU")
+def test_cuda(tmp_path):
+    assert run(config("device=cuda", "agent.group=D4"), tmp_path) == 0
