@@ -48,7 +48,7 @@ class NetworkConfig:
     latent_dim: int = 64
     hidden_dim: int = 256
     hidden_layers: int = 2
-    activation: str = "mish"
+    activation: str = "elu"
     num_q: int = 2
     equivariant: dict[str, bool] = field(
         default_factory=lambda: {name: True for name in COMPONENTS})
@@ -79,7 +79,7 @@ class FieldMLP(nn.Module):
     """
 
     def __init__(self, in_layout: Layout, hidden: list[Layout], out_layout: Layout,
-                 activation_name: str = "mish") -> None:
+                 activation_name: str = "elu") -> None:
         super().__init__()
         layers, previous = [], in_layout
         for layout in hidden:
