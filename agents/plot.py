@@ -1,0 +1,180 @@
+"""``geomdp-plot``: reward curves with 95% bootstrap confidence intervals, and a table.
+
+    geomdp-plot results/experiments/pointmass2d_curves_cpu --out assets/pointmass2d_curves_cpu.png \\
+        --threshold 800 --reference 884:LQR
+
+Finds every run directory (one with ``eval.csv`` and ``config.yaml``) under the
+given paths, groups runs by the options in which they differ (all but the
+seed), and draws, per group, the mean evaluation return over seeds with a 95%
+bootstrap confidence interval (``scipy.stats.bootstrap``). Runs of unequal
+length, or still in progress, are fine: at each evaluation step, the seeds
+that have reached it are used. Prints a markdown table of final returns (mean
+with 95% CI, IQM) and of the environment steps each seed took to reach
+``--threshold``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from omegaconf import OmegaConf
+from scipy import stats
+
+IGNORED_KEYS = ("seed", "train.progress", "train.threads", "logger", "device",
+                "train.eval_every", "train.eval_episodes")
+
+
+@dataclass
+class Run:
+    path: Path
+    options: dict[str, object]
+    steps: np.ndarray
+    returns: np.ndarray
+
+
+def _flatten(d: dict, prefix: str = "") -> dict[str, object]:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def find_runs(paths: list[Path]) -> list[Run]:
+    runs = []
+    for root in paths:
+        for eval_csv in sorted(root.rglob("eval.csv")):
+            config = eval_csv.parent / "config.yaml"
+            if not config.exists():
+                continue
+            with eval_csv.open(newline="") as f:
+                rows = list(csv.DictReader(f))
+            if not rows:
+                continue
+            options = _flatten(OmegaConf.to_container(OmegaConf.load(config), resolve=False))
+            runs.append(Run(eval_csv.parent, options,
+                            np.array([int(float(r["env_step"])) for r in rows]),
+                            np.array([float(r["episode_reward"]) for r in rows])))
+    return runs
+
+
+def group_runs(runs: list[Run]) -> dict[str, list[Run]]:
+    """Runs keyed by the options that differ between them (seed and display options aside)."""
+    keys = sorted({k for r in runs for k in r.options
+                   if not k.startswith(IGNORED_KEYS)
+                   and len({str(x.options.get(k)) for x in runs}) > 1})
+    groups: dict[str, list[Run]] = {}
+    for r in runs:
+        label = ", ".join(f"{k.split('.')[-1]}={r.options.get(k)}" for k in keys) or "all runs"
+        groups.setdefault(label, []).append(r)
+    return groups
+
+
+def mean_ci(values: np.ndarray) -> tuple[float, float, float]:
+    """Mean and 95% bootstrap confidence interval (the mean itself when n < 2)."""
+    mean = float(np.mean(values))
+    if len(values) < 2 or np.all(values == values[0]):
+        return mean, mean, mean
+    ci = stats.bootstrap((values,), np.mean, confidence_level=0.95, n_resamples=2000,
+                         method="percentile", random_state=0).confidence_interval
+    return mean, float(ci.low), float(ci.high)
+
+
+def curve(runs: list[Run]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(steps, mean, ci low, ci high, seeds) over the union of evaluation steps."""
+    steps = np.unique(np.concatenate([r.steps for r in runs]))
+    out = []
+    for s in steps:
+        values = np.array([r.returns[r.steps == s][0] for r in runs if s in r.steps])
+        out.append((*mean_ci(values), len(values)))
+    mean, low, high, n = (np.array(c) for c in zip(*out))
+    return steps, mean, low, high, n
+
+
+def steps_to_threshold(run: Run, threshold: float) -> int | None:
+    reached = run.steps[run.returns >= threshold]
+    return int(reached[0]) if len(reached) else None
+
+
+def table(groups: dict[str, list[Run]], threshold: float | None) -> str:
+    header = "| runs | seeds | env steps | final return (mean, 95% CI) | IQM |"
+    sep = "|---|---|---|---|---|"
+    if threshold is not None:
+        header += f" env steps to reach {threshold:g} (per seed) |"
+        sep += "---|"
+    rows = [header, sep]
+    for label, runs in groups.items():
+        finals = np.array([r.returns[-1] for r in runs])
+        mean, low, high = mean_ci(finals)
+        iqm = stats.trim_mean(finals, 0.25)
+        steps = sorted({int(r.steps[-1]) for r in runs})
+        row = (f"| {label} | {len(runs)} | {'/'.join(map(str, steps))} | "
+               f"{mean:.1f} [{low:.1f}, {high:.1f}] | {iqm:.1f} |")
+        if threshold is not None:
+            reached = [steps_to_threshold(r, threshold) for r in runs]
+            row += " " + ", ".join("–" if s is None else str(s) for s in reached) + " |"
+        rows.append(row)
+    return "\n".join(rows)
+
+
+def plot(groups: dict[str, list[Run]], out: Path, title: str,
+         references: list[tuple[float, str]]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
+    for label, runs in groups.items():
+        steps, mean, low, high, n = curve(runs)
+        line, = ax.plot(steps, mean, label=f"{label} ({len(runs)} seeds)")
+        ax.fill_between(steps, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
+    for value, name in references:
+        ax.axhline(value, color="black", linestyle="--", linewidth=1, label=name)
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("evaluation return")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("paths", nargs="+", type=Path, help="directories holding run directories")
+    parser.add_argument("--out", type=Path, help="PNG to write")
+    parser.add_argument("--title", default=None)
+    parser.add_argument("--threshold", type=float, default=None,
+                        help="report env steps to reach this return")
+    parser.add_argument("--reference", action="append", default=[],
+                        help="VALUE:NAME, a horizontal line (e.g. 884:LQR oracle)")
+    parser.add_argument("--markdown", type=Path, help="also write the table to this file")
+    args = parser.parse_args(argv)
+    runs = find_runs(args.paths)
+    if not runs:
+        raise SystemExit(f"geomdp-plot: error: no run directories (eval.csv + config.yaml) under "
+                         f"{', '.join(map(str, args.paths))}")
+    groups = group_runs(runs)
+    references = []
+    for ref in args.reference:
+        value, _, name = ref.partition(":")
+        references.append((float(value), name or "reference"))
+    if args.out:
+        plot(groups, args.out, args.title or args.paths[0].name, references)
+    text = table(groups, args.threshold)
+    print(text)
+    if args.markdown:
+        args.markdown.write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,72 @@
+"""Experiment configs compose, sweeps run on Hydra's launchers, and plots cope with real runs."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from test_train import TINY, TRAIN
+
+from agents import plot
+from agents.train import CONFIG_DIR
+
+EXPERIMENTS = sorted(p.stem for p in (CONFIG_DIR / "experiment").glob("*.yaml"))
+
+
+def test_there_is_a_paper_and_a_cpu_config_per_figure():
+    paper = [e for e in EXPERIMENTS if not e.endswith("_cpu")]
+    assert len(paper) == 8
+    assert all(f"{e}_cpu" in EXPERIMENTS for e in paper)
+
+
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_experiment_config_composes_into_a_valid_sweep(name):
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose("train", overrides=[f"+experiment={name}"], return_hydra_config=True)
+    params = cfg.hydra.sweeper.params
+    assert "seed" in params and len(str(params.seed).split(",")) == (3 if name.endswith("_cpu") else 5)
+    hidden = cfg.agent.networks.hidden_dim
+    assert hidden == (128 if name.endswith("_cpu") else 512)
+    assert str(cfg.hydra.mode) == "RunMode.MULTIRUN"
+
+
+@pytest.mark.parametrize("launcher", ["joblib", "submitit_local"])
+def test_a_sweep_runs_on_the_launcher(launcher, tmp_path):
+    out = subprocess.run(
+        [*TRAIN, "+experiment=pointmass2d_curves_cpu", *TINY, "train.steps=1000", "seed=1",
+         f"hydra.sweep.dir={tmp_path}", f"hydra/launcher={launcher}"]
+        + (["hydra.launcher.timeout_min=10"] if launcher == "submitit_local" else []),
+        capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert sorted(p.parent.relative_to(tmp_path).as_posix()
+                  for p in tmp_path.rglob("eval.csv")) == ["D8/seed1", "none/seed1"]
+
+
+def write_run(path: Path, group: str, seed: int, returns: list[float]):
+    path.mkdir(parents=True)
+    (path / "config.yaml").write_text(f"seed: {seed}\nagent:\n  group: {group}\n")
+    lines = ["env_step,episode_reward"] + [f"{1000 * i},{r}" for i, r in enumerate(returns)]
+    (path / "eval.csv").write_text("\n".join(lines) + "\n")
+
+
+def test_plot_handles_unequal_and_unfinished_runs(tmp_path, capsys):
+    write_run(tmp_path / "a/1", "none", 1, [0, 100, 500, 900])
+    write_run(tmp_path / "a/2", "none", 2, [0, 50, 850])  # still running
+    write_run(tmp_path / "b/1", "D8", 1, [0, 900, 950, 960])
+    out = tmp_path / "curves.png"
+    plot.main([str(tmp_path), "--out", str(out), "--threshold", "800", "--reference", "884:LQR"])
+    assert out.stat().st_size > 10_000
+    table = capsys.readouterr().out
+    assert "| group=none | 2 | 2000/3000 |" in table
+    assert "| group=D8 | 1 | 3000 | 960.0 [960.0, 960.0] | 960.0 | 1000 |" in table
+    assert "3000, 2000 |" in table  # steps to 800, per seed
+    runs = plot.group_runs(plot.find_runs([tmp_path]))
+    steps, mean, low, high, n = plot.curve(runs["group=none"])
+    assert list(n) == [2, 2, 2, 1] and low[2] <= mean[2] <= high[2]
+
+
+def test_plot_without_runs_is_a_clear_error(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "agents.plot", str(tmp_path)],
+                         capture_output=True, text=True)
+    assert out.returncode != 0 and "no run directories" in out.stderr
