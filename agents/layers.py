@@ -15,6 +15,8 @@ parameters would not.
 
 from __future__ import annotations
 
+import copy
+
 import torch
 import torch.nn.functional as F
 from escnn import nn as enn
@@ -65,6 +67,10 @@ class EquivariantLinear(nn.Module):
     def __init__(self, in_type: enn.FieldType, out_type: enn.FieldType, bias: bool = True) -> None:
         super().__init__()
         self.layer = enn.Linear(in_type, out_type, bias=bias)
+        # escnn caches one basis module per pair of representations and shares it
+        # between layers, so .to()/.double() on one network would change the others'
+        # buffers (seen: a float network failing after another was made double). Own a copy.
+        self.layer._basisexpansion = copy.deepcopy(self.layer._basisexpansion)
         self._cache_key: tuple | None = None
         self._cache: tuple[torch.Tensor, torch.Tensor | None] | None = None
 

@@ -199,3 +199,14 @@ def test_policy_squash_keeps_vectors_in_the_unit_ball_and_is_equivariant(group_n
     g = group.element_matrix(elements_of(group)[-1])
     np.testing.assert_allclose(project(torch.as_tensor(sym.transform_action(x.numpy(), g)),
                                        sym.action).numpy(), sym.transform_action(p, g), atol=1e-12)
+
+
+def test_networks_do_not_share_escnn_buffers():
+    """escnn shares basis modules between layers; .double() on one network must not
+    reach another built for the same group."""
+    sym = declaration("GeoMDP/PointMass2D-v0", {})
+    a = build_networks(NetworkConfig(group="D4", **SMALL), sym)
+    b = build_networks(NetworkConfig(group="D4", **SMALL), sym)
+    a.encoder.double()
+    assert b.encoder(torch.randn(3, 4)).dtype == torch.float32
+    assert a.encoder(torch.randn(3, 4, dtype=torch.float64)).dtype == torch.float64
