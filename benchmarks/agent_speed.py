@@ -21,9 +21,11 @@ import time
 
 import gymnasium
 import torch
+from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 import geomdp_envs  # noqa: F401
+from agents import train
 from agents.layers import EquivariantLinear
 from agents.replay import make_replay_buffer, sample_slices
 from agents.tdmpc import TDMPCAgent, TDMPCConfig
@@ -34,16 +36,11 @@ TASKS = {"PointMass2D": ("pointmass2d", ["none", "D8"]),
 
 
 def agent_config(preset: str, group: str, strategy: str) -> TDMPCConfig:
-    data = OmegaConf.to_container(OmegaConf.load(CONFIG_DIR / "agent" / f"{preset}.yaml"))
-    if "defaults" in data:  # the paper preset extends the CPU one
-        base = OmegaConf.load(CONFIG_DIR / "agent" / "tdmpc.yaml")
-        data.pop("defaults")
-        data = OmegaConf.to_container(OmegaConf.merge(base, data))
-    data.pop("group")
-    data.pop("width_strategy")
-    networks = dict(data.pop("networks"), group=None if group == "none" else group,
-                    width_strategy=strategy, equivariant=data.pop("equivariant"))
-    return TDMPCConfig.from_dict({"networks": networks, **data})
+    """The agent options ``geomdp-train agent=<preset>`` would use."""
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose("train", overrides=[f"agent={preset}", f"agent.group={group}",
+                                          f"agent.width_strategy={strategy}"])
+    return train.agent_config(cfg)
 
 
 def linear_flops(module: torch.nn.Module) -> int:
