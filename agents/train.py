@@ -27,6 +27,7 @@ import torch
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModule
 from torchrl.envs import GymWrapper, TransformedEnv
 from torchrl.envs.transforms import FrameSkipTransform
 from tqdm import tqdm
@@ -189,18 +190,19 @@ class Trainer:
                 out.append(v / v.norm() * radius)
         return torch.cat(out)
 
-    def policy(self, explore: bool, random: bool) -> Any:
+    def policy(self, explore: bool, random: bool) -> TensorDictModule:
+        """The acting policy for one episode: random warm-up actions, or the planner."""
         step = [self.state["agent_step"]]
 
-        def act(td: TensorDictBase) -> TensorDictBase:
+        def act(observation: torch.Tensor) -> torch.Tensor:
             if random:
                 action = self.random_action()
             else:
-                action = self.agent.act(td["observation"], step[0], explore=explore)
+                action = self.agent.act(observation, step[0], explore=explore)
             step[0] += 1
-            return td.set("action", action.to(torch.float32).cpu())
+            return action.to(torch.float32).cpu()
 
-        return act
+        return TensorDictModule(act, in_keys=["observation"], out_keys=["action"])
 
     def episode(self, env: TransformedEnv, seed: int, explore: bool, random: bool) -> TensorDictBase:
         self.agent.planner.reset()
