@@ -1,0 +1,59 @@
+"""Replay a trained run's agent from its checkpoint and show where episodes end.
+
+    python examples/inspect_run.py results/learning_check/pointmass2d/D8/seed2 [--episodes 4]
+
+Prints, per episode, the first two observation coordinates at the start and
+at the end (for PointMass2D: the mass's position) and the return, with the
+planner in evaluation mode (no exploration noise).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import torch
+from omegaconf import OmegaConf
+
+from agents import checkpoint
+from agents.replay import make_replay_buffer
+from agents.tdmpc import TDMPCAgent
+from agents.train import agent_config, make_gym_env
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("--episodes", type=int, default=4)
+    parser.add_argument("--seed", type=int, default=500)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    cfg = OmegaConf.load(args.run_dir / "config.yaml")
+    agent_cfg = agent_config(cfg)
+    env = make_gym_env(cfg.env)
+    sym = getattr(env.unwrapped, "symmetry", None)
+    agent = TDMPCAgent(agent_cfg, sym, env.observation_space.shape[0], env.action_space.shape[0])
+    state = checkpoint.load(args.run_dir, agent, make_replay_buffer(
+        agent_cfg.replay, agent_cfg.horizon, agent_cfg.batch_size))
+    if state is None:
+        raise SystemExit(f"no checkpoint in {args.run_dir}")
+    print(f"{args.run_dir}: agent at env step {state['env_step']}")
+    for episode in range(args.episodes):
+        obs, _ = env.reset(seed=args.seed + episode)
+        start, total, done = obs[:2].copy(), 0.0, False
+        agent.planner.reset()
+        while not done:
+            action = agent.act(torch.as_tensor(obs), state["agent_step"], explore=False).numpy()
+            for _ in range(int(cfg.env.action_repeat)):
+                obs, reward, terminated, truncated, _ = env.step(action)
+                total += reward
+                done = terminated or truncated
+                if done:
+                    break
+        print(f"episode {episode}: start {np.round(start, 3)} end {np.round(obs[:2], 3)} "
+              f"return {total:.1f}")
+
+
+if __name__ == "__main__":
+    main()
