@@ -90,7 +90,11 @@ class EquivariantLinear(nn.Module):
 
     def expanded(self) -> tuple[torch.Tensor, torch.Tensor | None]:
         """(weight, bias) as plain matrices, as ``nn.Linear`` would hold them."""
-        params = list(self.layer.parameters())
+        # Read the two parameters directly: ``Module.parameters()`` walks the module
+        # tree and hashes escnn's basis modules, which cost more than the matmul
+        # itself in planning (measured: 60% of a D8 plan). Attribute lookups also
+        # see parameters swapped in by ``TensorDict.to_module``.
+        params = [p for p in (self.layer.weights, self.layer.bias) if p is not None]
         if torch.is_grad_enabled() and any(p.requires_grad for p in params):
             return self.layer.expand_parameters()
         key = tuple((p.data_ptr(), p._version) for p in params)
