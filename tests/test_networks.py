@@ -210,3 +210,28 @@ def test_networks_do_not_share_escnn_buffers():
     a.encoder.double()
     assert b.encoder(torch.randn(3, 4)).dtype == torch.float32
     assert a.encoder(torch.randn(3, 4, dtype=torch.float64)).dtype == torch.float64
+
+
+def test_swapped_in_parameters_are_the_ones_used():
+    """TensorDict.to_module (the policy loss's frozen Q) swaps parameters in; the
+    layer must use them, with gradients to the input and none to the parameters."""
+    from tensordict import TensorDict
+
+    sym = declaration(*TASK_3D)
+    config = NetworkConfig(group="octahedral", **SMALL)
+    net, other = build_networks(config, sym).dynamics, build_networks(config, sym).dynamics
+    x = torch.randn(8, net.in_layout.size, requires_grad=True)
+    own, expected = net(x).detach(), other(x).detach()
+    assert (own - expected).abs().max() > 1e-3
+    with torch.no_grad():
+        net(x)  # fill the inference cache with its own weights
+    with TensorDict.from_module(other).detach().to_module(net):
+        with torch.no_grad():
+            np.testing.assert_allclose(net(x).numpy(), expected.numpy(), atol=1e-6)
+        swapped = net(x)
+        swapped.sum().backward()
+    np.testing.assert_allclose(swapped.detach().numpy(), expected.numpy(), atol=1e-6)
+    assert x.grad is not None and x.grad.abs().max() > 0
+    assert all(p.grad is None for p in net.parameters())
+    with torch.no_grad():  # restored: its own parameters again, through the cache too
+        np.testing.assert_allclose(net(x).numpy(), own.numpy(), atol=1e-6)
