@@ -15,7 +15,10 @@ parameters would not.
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import math
+from collections.abc import Iterator
 
 import torch
 import torch.nn.functional as F
@@ -56,23 +59,36 @@ def is_pointwise(layout: Layout) -> bool:
 class EquivariantLinear(nn.Module):
     """A G-equivariant linear map (escnn's basis), applied as a plain ``F.linear``.
 
-    escnn expands the weight from its basis coefficients at every call. With
-    gradients on, so does this layer (the expansion is part of the graph).
-    Without them (planning, evaluation) the expanded weight is cached and
-    reused until a parameter changes in place (optimiser step, ``SoftUpdate``,
-    ``load_state_dict``): the cache is keyed on the parameters' version
-    counters, so it can never be stale.
+    The weight matrix is a linear function of escnn's basis coefficients (the
+    layer's parameters). Outside an ``expansion_scope`` it is expanded from them
+    at every call, so it always reflects the parameters as they are now, however
+    they were written (optimiser, ``SoftUpdate`` through ``.data``,
+    ``load_state_dict``, ``TensorDict.to_module``).
+
+    Inside an ``expansion_scope`` it is expanded once, at the scope's entry, and
+    reused by every call: that is how the planner (hundreds of network calls per
+    action) and the loss (the horizon unroll) avoid re-expanding. The scope is
+    the explicit refresh point; there is no cache that outlives it. An earlier
+    design cached across calls keyed on the parameters' version counters and
+    was silently stale after writes through ``.data`` (TorchRL's ``SoftUpdate``,
+    fused Adam): the target network never moved.
     """
 
-    def __init__(self, in_type: enn.FieldType, out_type: enn.FieldType, bias: bool = True) -> None:
+    def __init__(self, in_type: enn.FieldType, out_type: enn.FieldType, bias: bool = True,
+                 bias_init: float = 0.0) -> None:
         super().__init__()
         self.layer = enn.Linear(in_type, out_type, bias=bias)
         # escnn caches one basis module per pair of representations and shares it
         # between layers, so .to()/.double() on one network would change the others'
         # buffers (seen: a float network failing after another was made double). Own a copy.
         self.layer._basisexpansion = copy.deepcopy(self.layer._basisexpansion)
-        self._cache_key: tuple | None = None
-        self._cache: tuple[torch.Tensor, torch.Tensor | None] | None = None
+        if self.layer.bias is not None and bias_init > 0:
+            # escnn starts biases (one per trivial sub-field) at zero; see ``make_linear``
+            # for why they are spread out instead, as nn.Linear's are.
+            with torch.no_grad():
+                self.layer.bias.uniform_(-bias_init, bias_init)
+        self._scoped: tuple[tuple[torch.Tensor | None, ...], torch.Tensor,
+                            torch.Tensor | None] | None = None
 
     @property
     def in_type(self) -> enn.FieldType:
@@ -84,25 +100,42 @@ class EquivariantLinear(nn.Module):
 
     def train(self, mode: bool = True) -> EquivariantLinear:
         # escnn's Linear stores expanded buffers in eval mode, which would change
-        # the state_dict between modes; this layer caches on its own instead.
+        # the state_dict between modes; this layer never uses them.
         self.training = mode
         return self
 
+    def _current_parameters(self) -> tuple[torch.Tensor | None, ...]:
+        # Attribute lookups, not ``Module.parameters()``: they see parameters swapped
+        # in by ``TensorDict.to_module``, and do not walk escnn's basis modules
+        # (which cost more than the matmul itself in planning).
+        return (self.layer.weights, self.layer.bias)
+
+    def expand(self) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """(weight, bias) as plain matrices, freshly expanded from the parameters."""
+        return self.layer.expand_parameters()
+
+    def open_scope(self) -> None:
+        """Expand now and reuse the result until ``close_scope`` (see ``expansion_scope``)."""
+        weight, bias = self.expand()
+        self._scoped = (self._current_parameters(), weight, bias)
+
+    def close_scope(self) -> None:
+        self._scoped = None
+
     def expanded(self) -> tuple[torch.Tensor, torch.Tensor | None]:
-        """(weight, bias) as plain matrices, as ``nn.Linear`` would hold them."""
-        # Read the two parameters directly: ``Module.parameters()`` walks the module
-        # tree and hashes escnn's basis modules, which cost more than the matmul
-        # itself in planning (measured: 60% of a D8 plan). Attribute lookups also
-        # see parameters swapped in by ``TensorDict.to_module``.
-        params = [p for p in (self.layer.weights, self.layer.bias) if p is not None]
-        if torch.is_grad_enabled() and any(p.requires_grad for p in params):
-            return self.layer.expand_parameters()
-        key = tuple((p.data_ptr(), p._version) for p in params)
-        if key != self._cache_key:
-            with torch.no_grad():
-                self._cache = self.layer.expand_parameters()
-            self._cache_key = key
-        return self._cache
+        """The weight and bias this call uses: the scope's, or a fresh expansion."""
+        if self._scoped is not None:
+            scoped_params, weight, bias = self._scoped
+            current = self._current_parameters()
+            if all(c is s for c, s in zip(current, scoped_params)):
+                if weight.requires_grad or not torch.is_grad_enabled() or not any(
+                        p is not None and p.requires_grad for p in current):
+                    return weight, bias
+            elif all(_aliases(c, s) for c, s in zip(current, scoped_params)):
+                # Detached aliases swapped in by ``to_module`` (the policy loss's frozen
+                # Q): the same memory, unwritten inside the scope, so the same values.
+                return weight.detach(), None if bias is None else bias.detach()
+        return self.expand()
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         weight, bias = self.expanded()
@@ -110,7 +143,8 @@ class EquivariantLinear(nn.Module):
 
     def export(self) -> nn.Linear:
         """A plain ``nn.Linear`` with the current expanded weights."""
-        weight, bias = self.expanded()
+        with torch.no_grad():
+            weight, bias = self.expand()
         out = nn.Linear(weight.shape[1], weight.shape[0], bias=bias is not None)
         with torch.no_grad():
             out.weight.copy_(weight)
@@ -119,13 +153,47 @@ class EquivariantLinear(nn.Module):
         return out.to(weight.device)
 
 
+def _aliases(a: torch.Tensor | None, b: torch.Tensor | None) -> bool:
+    """Whether two tensors view the same memory the same way (``None`` matches ``None``)."""
+    if a is None or b is None:
+        return a is b
+    return (a.data_ptr() == b.data_ptr() and a.shape == b.shape and a.stride() == b.stride()
+            and a.dtype == b.dtype and not a.requires_grad)
+
+
+@contextlib.contextmanager
+def expansion_scope(*modules: nn.Module) -> Iterator[None]:
+    """Expand every equivariant weight of ``modules`` once, and reuse it until exit.
+
+    The contract: nothing writes the parameters inside the scope. The agent opens
+    one around each plan (no gradients) and one around each loss evaluation (with
+    gradients, so the expansions are part of the graph: one per layer per update,
+    not one per call). Optimiser steps, target updates and loads happen outside,
+    and the next scope expands again, so no write path can leave a stale weight.
+    A scope inside a scope re-expands; leaving it restores the outer one.
+    """
+    layers = [m for module in modules for m in module.modules() if isinstance(m, EquivariantLinear)]
+    outer = [layer._scoped for layer in layers]
+    try:
+        for layer in layers:
+            layer.open_scope()
+        yield
+    finally:
+        for layer, saved in zip(layers, outer):
+            layer._scoped = saved
+
+
 def make_linear(in_layout: Layout, out_layout: Layout, bias: bool = True) -> nn.Module:
     """``nn.Linear`` between plain layouts, ``EquivariantLinear`` between field types."""
     if isinstance(in_layout, int) and isinstance(out_layout, int):
         return nn.Linear(in_layout, out_layout, bias=bias)
     if isinstance(in_layout, int) or isinstance(out_layout, int):
         raise TypeError("a linear layer maps plain to plain or field type to field type")
-    return EquivariantLinear(in_layout, out_layout, bias=bias)
+    # Biases start as nn.Linear's do (uniform, +-1/sqrt(fan_in)), not at escnn's zero:
+    # an equivariant map from vector fields has zero mean over its output channels,
+    # so with zero biases the LayerNorm after it would divide out |input| entirely.
+    return EquivariantLinear(in_layout, out_layout, bias=bias,
+                             bias_init=1 / math.sqrt(layout_size(in_layout)))
 
 
 class FieldLayerNorm(nn.Module):
@@ -146,8 +214,10 @@ class FieldLayerNorm(nn.Module):
         self.register_buffer("field_index", index, persistent=False)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        x = F.layer_norm(x, (self.size,), eps=self.eps)
-        return x * self.weight[self.field_index] + self.bias[self.field_index]
+        # The tied scale and shift gathered to one per channel, applied inside the kernel
+        # (half the time of normalising, then gathering, multiplying and adding).
+        return F.layer_norm(x, (self.size,), self.weight[self.field_index],
+                            self.bias[self.field_index], self.eps)
 
 
 def activation(name: str) -> nn.Module:

@@ -27,6 +27,7 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictParams
 from torchrl.objectives import LossModule
 
+from agents.layers import expansion_scope
 from agents.world_model import WorldModel
 
 
@@ -39,7 +40,8 @@ class LossConfig:
     value_coef: float = 0.1
     rho: float = 0.5
     discount: float = 0.99
-    policy_noise: float = 0.05  # TD-MPC's min_std, added to pi in the TD target and pi loss
+    policy_noise: float = 0.05  # TD-MPC's min_std: pi's noise in the TD target, pi loss and planner
+    noise_clip: float = 0.3  # TD-MPC clips that noise to +-0.3 (by norm for a vector field)
 
 
 class TDMPCLoss(LossModule):
@@ -61,6 +63,12 @@ class TDMPCLoss(LossModule):
         self._has_update_associated["model"] = False  # until SoftUpdate registers itself
 
     def forward(self, batch: TensorDictBase) -> TensorDict:
+        # One expansion of every equivariant weight of both models per call: the online
+        # ones inside the graph, the target's from its current (SoftUpdate-written) values.
+        with expansion_scope(self.model, self.target_model):
+            return self._losses(batch)
+
+    def _losses(self, batch: TensorDictBase) -> TensorDict:
         cfg, model = self.config, self.model
         obs, action = batch["observation"], batch["action"]
         next_obs, reward = batch["next", "observation"], batch["next", "reward"]
@@ -78,11 +86,12 @@ class TDMPCLoss(LossModule):
             td_target = reward + cfg.discount * not_done * target_q
 
         z = model.encode(obs[:, 0])
-        latents = []
+        latents, q_first = [], None
         consistency = reward_loss = value_loss = priority = 0.0
         for t in range(horizon):
             latents.append(z.detach())
             q = model.q(z, action[:, t])
+            q_first = q.detach() if q_first is None else q_first
             reward_pred = model.reward(z, action[:, t])
             z = model.next(z, action[:, t])
             rho = cfg.rho ** t
@@ -101,6 +110,8 @@ class TDMPCLoss(LossModule):
             "consistency": consistency.mean().detach(),
             "reward_error": reward_loss.mean().detach(),
             "value_error": value_loss.mean().detach(),
+            "q_mean": q_first.mean(),
+            "td_target_mean": td_target[:, 0].mean(),
             "priority": priority.detach(),
         }, batch_size=[])
 

@@ -93,6 +93,17 @@ class FieldMLP(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.net(x)
 
+    def zero_output_layer(self) -> FieldMLP:
+        """Start with an output of exactly zero (TD-MPC's reward and Q heads).
+
+        Zero basis coefficients expand to a zero matrix, so this holds for
+        equivariant layers too.
+        """
+        with torch.no_grad():
+            for p in self.net[-1].parameters():
+                p.zero_()
+        return self
+
 
 class Space:
     """The layouts one component works with: plain sizes, or field types of a group."""
@@ -144,19 +155,21 @@ def squash(x: torch.Tensor, fields: tuple[Field, ...]) -> torch.Tensor:
     return torch.cat(parts, dim=-1)
 
 
-def project(x: torch.Tensor, fields: tuple[Field, ...]) -> torch.Tensor:
-    """The nearest point of the action domain: vector fields longer than 1 are
-    scaled back onto the unit sphere, scalar fields clipped to [-1, 1].
+def project(x: torch.Tensor, fields: tuple[Field, ...], radius: float = 1.0) -> torch.Tensor:
+    """The nearest point of the action domain scaled by ``radius``: vector fields
+    longer than ``radius`` are scaled back onto that sphere, scalar fields clipped
+    to [-radius, radius].
 
-    The equivariant counterpart of clamping each coordinate to [-1, 1].
+    The equivariant counterpart of clamping each coordinate (the action domain
+    with radius 1; TD-MPC's noise clip with radius 0.3).
     """
     parts = []
     for f in fields:
         v = x[..., f.start:f.stop]
         if f.size == 1:
-            parts.append(v.clamp(-1, 1))
+            parts.append(v.clamp(-radius, radius))
         else:
-            parts.append(v / v.norm(dim=-1, keepdim=True).clamp_min(1.0))
+            parts.append(v * (radius / v.norm(dim=-1, keepdim=True).clamp_min(radius)))
     return torch.cat(parts, dim=-1)
 
 
@@ -220,8 +233,9 @@ def build_networks(config: NetworkConfig, symmetry: Symmetry | None,
     return Networks(
         encoder=t.mlp(t.observation, latent),
         dynamics=t.mlp(concat(latent, t.action), latent),
-        reward=t.mlp(concat(latent, t.action), t.scalar),
-        qs=nn.ModuleList(q.mlp(concat(q.latent, q.action), q.scalar) for _ in range(config.num_q)),
+        reward=t.mlp(concat(latent, t.action), t.scalar).zero_output_layer(),
+        qs=nn.ModuleList(q.mlp(concat(q.latent, q.action), q.scalar).zero_output_layer()
+                         for _ in range(config.num_q)),
         policy=p.mlp(p.latent, p.action),
         group=group, exact=exact, config=config, action_fields=action,
     )

@@ -63,8 +63,11 @@ class NoiseSource:
 class MPPIPlanner:
     """Plans one action at a time; keeps the previous plan for warm starts."""
 
-    def __init__(self, model: WorldModel, config: PlannerConfig) -> None:
+    def __init__(self, model: WorldModel, config: PlannerConfig, policy_noise: float = 0.05) -> None:
         self.model, self.config = model, config
+        # TD-MPC samples the policy's trajectories and the terminal action with its
+        # fixed min_std (0.05), not with the scheduled exploration std.
+        self.policy_noise = policy_noise
         fields = model.action_fields
         self.field_index = torch.repeat_interleave(
             torch.arange(len(fields)), torch.tensor([f.size for f in fields]))
@@ -82,7 +85,7 @@ class MPPIPlanner:
         return out.index_add_(-1, self.field_index.to(values.device), values)
 
     @torch.no_grad()
-    def estimate_value(self, z: torch.Tensor, actions: torch.Tensor, min_std: float,
+    def estimate_value(self, z: torch.Tensor, actions: torch.Tensor,
                        noise: NoiseSource) -> torch.Tensor:
         """Discounted predicted rewards along ``actions`` [H, N, A] plus a terminal Q: [N, 1]."""
         value, discount = torch.zeros(z.shape[0], 1, dtype=z.dtype, device=z.device), 1.0
@@ -90,7 +93,8 @@ class MPPIPlanner:
             value = value + discount * self.model.reward(z, action)
             z = self.model.next(z, action)
             discount *= self.config.discount
-        terminal = self.model.pi(z, min_std, noise.normal((z.shape[0], self.model.action_dim), z))
+        terminal = self.model.pi(z, self.policy_noise,
+                                 noise.normal((z.shape[0], self.model.action_dim), z))
         return value + discount * self.model.q(z, terminal).min(dim=0).values
 
     @torch.no_grad()
@@ -110,7 +114,7 @@ class MPPIPlanner:
         if cfg.num_pi_trajs > 0:
             z = z0.expand(cfg.num_pi_trajs, -1)
             for t in range(horizon):
-                pi_actions[t] = model.pi(z, min_std, noise.normal(pi_actions[t].shape, z))
+                pi_actions[t] = model.pi(z, self.policy_noise, noise.normal(pi_actions[t].shape, z))
                 z = model.next(z, pi_actions[t])
 
         # The Gaussian over action sequences, warm-started from the previous plan.
@@ -126,7 +130,7 @@ class MPPIPlanner:
             eps = noise.normal((horizon, cfg.num_samples, action_dim), z0)
             samples = project(mean.unsqueeze(1) + std[:, index].unsqueeze(1) * eps, fields)
             actions = torch.cat([samples, pi_actions], dim=1)
-            value = self.estimate_value(z, actions, min_std, noise).squeeze(1)
+            value = self.estimate_value(z, actions, noise).squeeze(1)
             value = torch.nan_to_num(value, nan=-torch.inf)
             elite_value, elite_idx = torch.topk(value, cfg.num_elites)
             elite_actions = actions[:, elite_idx]

@@ -44,11 +44,17 @@ class CsvTable:
         return len(rows) - len(kept)
 
 
+# episode_reward: planner without exploration noise (TD-MPC's evaluation);
+# noisy_episode_reward: with the training noise at that step (the training episodes' setting).
 EVAL_COLUMNS = ["env_step", "agent_step", "episode", "wall_time", "episode_reward",
-                "episode_reward_std", "eval_episodes"]
+                "episode_reward_std", "eval_episodes", "noisy_episode_reward",
+                "noisy_episode_reward_std", "noisy_eval_episodes"]
+# q_mean / td_target_mean: the TD learner's health (they grow toward the return scale);
+# target_lag: |online - target| / |online| over all parameters (the target must track).
 TRAIN_COLUMNS = ["env_step", "agent_step", "episode", "wall_time", "updates", "loss_model",
-                 "loss_pi", "consistency", "reward_error", "value_error", "model_grad_norm",
-                 "policy_grad_norm", "episode_reward", "steps_per_second"]
+                 "loss_pi", "consistency", "reward_error", "value_error", "q_mean",
+                 "td_target_mean", "target_lag", "model_grad_norm", "policy_grad_norm",
+                 "episode_reward", "steps_per_second"]
 
 
 class RunLog:

@@ -10,6 +10,7 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.objectives import SoftUpdate
 
+from agents.layers import expansion_scope
 from agents.loss import LossConfig, TDMPCLoss
 from agents.networks import NetworkConfig, build_networks
 from agents.planner import MPPIPlanner, NoiseSource, PlannerConfig
@@ -87,15 +88,20 @@ class TDMPCAgent:
         self.config, self.device = config, torch.device(device)
         self.networks = build_networks(config.networks, symmetry, observation_size, action_size)
         self.action_fields = self.networks.action_fields
-        self.model = WorldModel(self.networks, self.action_fields).to(self.device)
+        self.model = WorldModel(self.networks, self.action_fields,
+                                noise_clip=config.loss.noise_clip).to(self.device)
         self.loss = TDMPCLoss(self.model, config.loss).to(self.device)
         self.target_updater = SoftUpdate(self.loss, tau=config.tau)
         policy_params = list(self.model.policy.parameters())
         policy_ids = {id(p) for p in policy_params}
+        # Fused Adam: one kernel over all parameters (the per-parameter loop's dispatch
+        # dominates at these sizes). Writes that bypass version counters are harmless:
+        # nothing here caches on them (see agents.layers.expansion_scope).
         self.model_optimizer = torch.optim.Adam(
-            [p for p in self.model.parameters() if id(p) not in policy_ids], lr=config.lr)
-        self.policy_optimizer = torch.optim.Adam(policy_params, lr=config.lr)
-        self.planner = MPPIPlanner(self.model, config.planner)
+            [p for p in self.model.parameters() if id(p) not in policy_ids], lr=config.lr,
+            fused=True)
+        self.policy_optimizer = torch.optim.Adam(policy_params, lr=config.lr, fused=True)
+        self.planner = MPPIPlanner(self.model, config.planner, config.loss.policy_noise)
         self.generator = torch.Generator().manual_seed(seed)
         self.noise = NoiseSource(self.generator)
         self.updates = 0
@@ -106,9 +112,12 @@ class TDMPCAgent:
     def act(self, obs: torch.Tensor, step: int, explore: bool) -> torch.Tensor:
         """Plan an action for ``obs``; ``step`` (agent steps) drives the schedules."""
         obs = obs.to(self.device, torch.float32)
-        return self.planner.plan(obs, horizon=self.horizon(step),
-                                 min_std=self.config.std_schedule(step), explore=explore,
-                                 noise=self.noise)
+        # Every equivariant weight expanded once for the whole plan, from the current
+        # parameters (updates happen between calls, never inside one).
+        with torch.no_grad(), expansion_scope(self.model):
+            return self.planner.plan(obs, horizon=self.horizon(step),
+                                     min_std=self.config.std_schedule(step), explore=explore,
+                                     noise=self.noise)
 
     def update(self, batch: TensorDictBase) -> dict[str, float]:
         """One gradient step on a [batch, horizon] TensorDict; returns losses and the priority."""
@@ -118,18 +127,29 @@ class TDMPCAgent:
         (losses["loss_model"] + losses["loss_pi"]).backward()
         clip = self.config.grad_clip_norm
         model_grad = torch.nn.utils.clip_grad_norm_(
-            [p for g in self.model_optimizer.param_groups for p in g["params"]], clip)
-        policy_grad = torch.nn.utils.clip_grad_norm_(self.model.policy.parameters(), clip)
+            [p for g in self.model_optimizer.param_groups for p in g["params"]], clip, foreach=True)
+        policy_grad = torch.nn.utils.clip_grad_norm_(self.model.policy.parameters(), clip,
+                                                     foreach=True)
         self.model_optimizer.step()
         self.policy_optimizer.step()
         self.updates += 1
         if self.updates % self.config.target_update_every == 0:
             self.target_updater.step()
-        metrics = {k: float(losses[k].detach()) for k in ("loss_model", "loss_pi", "consistency",
-                                                  "reward_error", "value_error")}
+        metrics = {k: float(losses[k].detach()) for k in (
+            "loss_model", "loss_pi", "consistency", "reward_error", "value_error", "q_mean",
+            "td_target_mean")}
         metrics.update(model_grad_norm=float(model_grad), policy_grad_norm=float(policy_grad))
         self.last_priority = losses["priority"]
         return metrics
+
+    @torch.no_grad()
+    def target_lag(self) -> float:
+        """|online - target| / |online| over all model parameters: small and non-zero
+        when the target tracks the online network, growing if it stopped moving."""
+        online = list(self.model.parameters())
+        target = list(self.loss.target_model.parameters())  # a deep copy: the same order
+        gap = torch.stack(torch._foreach_norm(torch._foreach_sub(online, target))).norm()
+        return float(gap / torch.stack(torch._foreach_norm(online)).norm())
 
     def state_dict(self) -> dict[str, Any]:
         return {"loss": self.loss.state_dict(),

@@ -42,7 +42,8 @@ from geomdp_envs.symmetry import Symmetry
 TASK_ENVS = ("pointmass2d", "pointmass3d", "reacher")
 ENV_META_KEYS = ("name", "id", "action_repeat")
 # Options that may change when a run is continued (budgets and display), and the rest must not.
-RESUMABLE_KEYS = ("train.steps", "train.eval_every", "train.eval_episodes", "train.progress",
+RESUMABLE_KEYS = ("train.steps", "train.eval_every", "train.eval_episodes",
+                  "train.eval_noisy_episodes", "train.progress",
                   "train.threads", "device", "logger.tensorboard")
 REPLAY_KEYS = ("observation", "action", "episode", ("next", "observation"),
                ("next", "reward"), ("next", "terminated"))
@@ -100,8 +101,9 @@ def validate(cfg: DictConfig) -> tuple[TDMPCConfig, Symmetry | None, int, int]:
                 "train.updates_per_step", "env.action_repeat"):
         if OmegaConf.select(cfg, key) is None or OmegaConf.select(cfg, key) < 1:
             raise ConfigError(f"{key} must be a positive integer, got {OmegaConf.select(cfg, key)}")
-    if cfg.train.seed_steps < 0:
-        raise ConfigError(f"train.seed_steps must be >= 0, got {cfg.train.seed_steps}")
+    for key in ("train.seed_steps", "train.eval_noisy_episodes"):
+        if OmegaConf.select(cfg, key) is None or OmegaConf.select(cfg, key) < 0:
+            raise ConfigError(f"{key} must be >= 0, got {OmegaConf.select(cfg, key)}")
     if cfg.device not in ("cpu", "cuda") and not str(cfg.device).startswith("cuda:"):
         raise ConfigError(f"device={cfg.device!r}; valid: cpu, cuda, cuda:<n>")
     if str(cfg.device).startswith("cuda") and not torch.cuda.is_available():
@@ -211,14 +213,23 @@ class Trainer:
                            break_when_any_done=True, auto_reset=True)
 
     def evaluate(self) -> None:
-        returns = [float(self.episode(self.eval_env, 10**6 + 1000 * self.cfg.seed + i,
-                                      explore=False, random=False)["next", "reward"].sum())
-                   for i in range(self.cfg.train.eval_episodes)]
+        """TD-MPC's evaluation (planner without exploration noise), and the same start
+        states with the training noise: a policy that only works with noise shows here."""
+        def returns(n: int, explore: bool) -> list[float]:
+            return [float(self.episode(self.eval_env, 10**6 + 1000 * self.cfg.seed + i,
+                                       explore=explore, random=False)["next", "reward"].sum())
+                    for i in range(n)]
+
+        plain = returns(self.cfg.train.eval_episodes, explore=False)
+        noisy = returns(self.cfg.train.eval_noisy_episodes, explore=True)
         self.state["last_eval_step"] = self.state["env_step"]
-        self.state["last_eval_reward"] = float(np.mean(returns))
-        self.log.log("eval", {**self._counters(), "episode_reward": np.mean(returns),
-                              "episode_reward_std": np.std(returns),
-                              "eval_episodes": len(returns)})
+        self.state["last_eval_reward"] = float(np.mean(plain))
+        self.log.log("eval", {
+            **self._counters(), "episode_reward": np.mean(plain),
+            "episode_reward_std": np.std(plain), "eval_episodes": len(plain),
+            "noisy_episode_reward": np.mean(noisy) if noisy else float("nan"),
+            "noisy_episode_reward_std": np.std(noisy) if noisy else float("nan"),
+            "noisy_eval_episodes": len(noisy)})
 
     def _counters(self) -> dict[str, float]:
         return {k: self.state[k] for k in ("env_step", "agent_step", "episode", "wall_time")}
@@ -257,6 +268,7 @@ class Trainer:
             if state["env_step"] >= cfg.seed_steps:
                 metrics = self.update(state["pending_updates"])
                 metrics["updates"] = state["pending_updates"]
+                metrics["target_lag"] = self.agent.target_lag()
                 state["pending_updates"] = 0
             elapsed = time.perf_counter() - start
             state["wall_time"] += elapsed
@@ -270,7 +282,7 @@ class Trainer:
                 state["wall_time"] += time.perf_counter() - eval_start
             checkpoint.save(self.run_dir, self.agent, self.buffer, state)
             bar.update(length * self.action_repeat)
-            bar.set_postfix(eval_return=state["last_eval_reward"])
+            bar.set_postfix(eval_return=f"{state['last_eval_reward']:.1f}")
         bar.close()
 
 

@@ -19,8 +19,10 @@ class WorldModel(nn.Module):
     projected back onto the domain.
     """
 
-    def __init__(self, networks: Networks, action_fields: tuple[Field, ...]) -> None:
+    def __init__(self, networks: Networks, action_fields: tuple[Field, ...],
+                 noise_clip: float = 0.3) -> None:
         super().__init__()
+        self.noise_clip = noise_clip
         self.encoder = networks.encoder
         self.dynamics = networks.dynamics
         self.reward_net = networks.reward
@@ -45,8 +47,14 @@ class WorldModel(nn.Module):
 
     def pi(self, z: torch.Tensor, std: float = 0.0,
            noise: torch.Tensor | None = None) -> torch.Tensor:
-        """The policy's action, plus ``std`` times ``noise`` (standard normal) if given."""
+        """The policy's action, plus ``std`` times ``noise`` (standard normal) if given.
+
+        As TD-MPC's truncated normal: the noise is clipped to ``noise_clip`` (by norm
+        for a vector field, which keeps the clip equivariant), and the sum is
+        projected back onto the action domain.
+        """
         mean = squash(self.policy(z), self.action_fields)
         if std <= 0 or noise is None:
             return mean
-        return project(mean + std * noise, self.action_fields)
+        clipped = project(std * noise, self.action_fields, radius=self.noise_clip)
+        return project(mean + clipped, self.action_fields)

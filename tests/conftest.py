@@ -19,3 +19,20 @@ TASK_CONFIGS = [
     pytest.param(("GeoMDP/Reacher-v0", {"difficulty": "easy", "frame": "local"}), id="reacher-easy-local"),
     pytest.param(("GeoMDP/Reacher-v0", {"difficulty": "hard", "frame": "global"}), id="reacher-hard-global"),
 ]
+
+
+@pytest.fixture
+def randomise_heads():
+    """Give the reward and Q heads non-zero output layers (they start at zero, as in
+    TD-MPC), so that tests of their equivariance cannot pass on zeros."""
+    import torch
+
+    def randomise(networks, seed=0):
+        gen = torch.Generator().manual_seed(seed)
+        with torch.no_grad():
+            for head in (networks.reward, *networks.qs):
+                for p in head.net[-1].parameters():
+                    p.copy_(0.3 * torch.randn(p.shape, generator=gen, dtype=p.dtype))
+        return networks
+
+    return randomise

@@ -43,9 +43,11 @@ CASES = [(g, "pointmass2d") for g in ("C4", "C8", "C16", "D4", "D8", "D16")] + \
 
 @pytest.mark.parametrize("group_name, task", CASES)
 @pytest.mark.parametrize("strategy", ["sqrt", "linear"])
-def test_every_network_is_equivariant_for_every_group_element(group_name, task, strategy):
+def test_every_network_is_equivariant_for_every_group_element(group_name, task, strategy,
+                                                            randomise_heads):
     sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
-    nets = build_networks(NetworkConfig(group=group_name, width_strategy=strategy, **SMALL), sym)
+    nets = randomise_heads(build_networks(
+        NetworkConfig(group=group_name, width_strategy=strategy, **SMALL), sym))
     torch.manual_seed(0)
     heads = {"encoder": nets.encoder, "dynamics": nets.dynamics, "reward": nets.reward,
              "q0": nets.qs[0], "q1": nets.qs[1], "policy": nets.policy}
@@ -64,10 +66,11 @@ def test_every_network_is_equivariant_for_every_group_element(group_name, task, 
     ("octahedral", "pointmass3d", groups.rotation_3d([1.0, 2.0, 3.0], 0.7)),
     ("icosahedral", "pointmass3d", groups.rotation_3d([1.0, 2.0, 3.0], 0.7)),
 ])
-def test_reward_is_invariant_inside_the_group_and_not_outside(group_name, task, outside):
+def test_reward_is_invariant_inside_the_group_and_not_outside(group_name, task, outside,
+                                                             randomise_heads):
     """r(h(g.o), g.a) = r(h(o), a), through the declared observation and action maps."""
     sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
-    nets = build_networks(NetworkConfig(group=group_name, **SMALL), sym)
+    nets = randomise_heads(build_networks(NetworkConfig(group=group_name, **SMALL), sym))
     torch.manual_seed(1)
     obs, act = torch.randn(64, sym.observation_size), torch.randn(64, sym.action_size)
 
@@ -235,3 +238,60 @@ def test_swapped_in_parameters_are_the_ones_used():
     assert all(p.grad is None for p in net.parameters())
     with torch.no_grad():  # restored: its own parameters again, through the cache too
         np.testing.assert_allclose(net(x).numpy(), own.numpy(), atol=1e-6)
+
+
+GROUPS = [("C4", "pointmass2d"), ("C8", "pointmass2d"), ("C16", "pointmass2d"),
+          ("D4", "pointmass2d"), ("D8", "pointmass2d"), ("D16", "pointmass2d"),
+          ("D8", "reacher"), ("octahedral", "pointmass3d"), ("icosahedral", "pointmass3d")]
+
+
+def relative_latent_change(encoder, directions, small, large):
+    with torch.no_grad():
+        z_small, z_large = encoder(small * directions), encoder(large * directions)
+    return ((z_large - z_small).norm(dim=-1) / z_small.norm(dim=-1)).mean().item()
+
+
+@pytest.mark.parametrize("group_name, task", GROUPS)
+@pytest.mark.parametrize("strategy", ["sqrt", "linear"])
+def test_encoder_keeps_the_magnitude_of_vector_observations(group_name, task, strategy):
+    """An equivariant map from vector fields has zero mean over its output channels;
+    the LayerNorm after it must not divide out |obs|. Scaling an observation must
+    move the latent state at least as much as it moves the plain encoder's."""
+    sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
+    cfg = dict(hidden_dim=128, latent_dim=32, hidden_layers=2, width_strategy=strategy)
+    directions = torch.randn(64, sym.observation_size, generator=torch.Generator().manual_seed(0))
+    directions = directions / directions.norm(dim=-1, keepdim=True)
+    for small, large in ((1e-3, 1e-2), (0.05, 0.1), (0.2, 0.4)):
+        changes = {}
+        for name in (None, group_name):
+            torch.manual_seed(0)
+            encoder = build_networks(NetworkConfig(group=name, **cfg), sym).encoder
+            changes[name] = relative_latent_change(encoder, directions, small, large)
+        assert changes[group_name] >= 0.5 * changes[None], (small, large, changes)
+
+
+@pytest.mark.parametrize("group_name, task", GROUPS)
+def test_gradients_are_finite_with_states_exactly_on_target(group_name, task):
+    """Exactly-zero observations (on the target, at rest) in a batch: every gradient
+    of TD-MPC's loss stays finite."""
+    from tensordict import TensorDict
+
+    from agents.loss import LossConfig, TDMPCLoss
+    from agents.world_model import WorldModel
+
+    sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
+    nets = build_networks(NetworkConfig(group=group_name, **SMALL), sym)
+    loss = TDMPCLoss(WorldModel(nets, sym.action), LossConfig())
+    n, horizon = 8, 3
+    obs = torch.randn(n, horizon, sym.observation_size) * 0.1
+    obs[:4] = 0.0
+    action = torch.zeros(n, horizon, sym.action_size)
+    action[4:] = 0.1
+    batch = TensorDict({"observation": obs, "action": action,
+                        "next": {"observation": obs.clone(), "reward": torch.ones(n, horizon, 1),
+                                 "terminated": torch.zeros(n, horizon, 1, dtype=torch.bool)}},
+                       batch_size=[n, horizon])
+    losses = loss(batch)
+    (losses["loss_model"] + losses["loss_pi"]).backward()
+    grads = [p.grad for p in loss.model.parameters() if p.grad is not None]
+    assert grads and all(torch.isfinite(g).all() for g in grads)

@@ -41,7 +41,12 @@ class TransformedNoise(NoiseSource):
         return self.choices.pop(0)
 
 
-def make_agent(env_id, kwargs, group):
+@pytest.fixture
+def make_agent(randomise_heads):
+    return lambda env_id, kwargs, group: _make_agent(env_id, kwargs, group, randomise_heads)
+
+
+def _make_agent(env_id, kwargs, group, randomise_heads):
     env = gymnasium.make(env_id, **kwargs)
     sym = env.unwrapped.symmetry
     cfg = TDMPCConfig.from_dict({
@@ -49,6 +54,7 @@ def make_agent(env_id, kwargs, group):
         "planner": {"num_samples": 64, "num_elites": 8, "num_pi_trajs": 8, "iterations": 3},
         "horizon": 3, "batch_size": 8})
     agent = TDMPCAgent(cfg, sym, sym.observation_size, sym.action_size)
+    randomise_heads(agent.networks)
     agent.model.double()
     return env, sym, agent
 
@@ -66,7 +72,7 @@ def plan_twice(agent, obs, noise):
     ("GeoMDP/PointMass3D-v0", {"n_balls": 2}, "octahedral", None),
     ("GeoMDP/PointMass3D-v0", {}, "icosahedral", None),
 ])
-def test_planner_is_equivariant(env_id, kwargs, group, element):
+def test_planner_is_equivariant(env_id, kwargs, group, element, make_agent):
     env, sym, agent = make_agent(env_id, kwargs, group)
     g = element if element is not None else agent.networks.group.element_matrix(
         agent.networks.group.elements()[7])
@@ -80,7 +86,7 @@ def test_planner_is_equivariant(env_id, kwargs, group, element):
     assert sym.action_in_domain(np.stack([a.numpy() for a in actions])).all()
 
 
-def test_plain_planner_is_not_equivariant():
+def test_plain_planner_is_not_equivariant(make_agent):
     """The same test fails for a plain agent: it can tell."""
     env, sym, agent = make_agent("GeoMDP/PointMass2D-v0", {}, None)
     g = groups.rotation_2d(np.pi / 2)

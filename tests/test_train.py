@@ -15,7 +15,8 @@ from agents.train import CONFIG_DIR, run
 
 # A run small enough for CI: 250-step episodes, a tiny agent.
 TINY = ["env.action_repeat=4", "train.steps=2000", "train.seed_steps=1000",
-        "train.eval_every=1000", "train.eval_episodes=1", "train.progress=false",
+        "train.eval_every=1000", "train.eval_episodes=1", "train.eval_noisy_episodes=1",
+        "train.progress=false",
         "agent.networks.hidden_dim=16", "agent.networks.latent_dim=8",
         "agent.planner.num_samples=16", "agent.planner.num_elites=4",
         "agent.planner.num_pi_trajs=2", "agent.planner.iterations=1", "agent.horizon=3",
@@ -52,10 +53,15 @@ def test_same_seed_gives_the_same_eval_csv(tmp_path):
     assert rows(tmp_path / "a/train.csv") == rows(tmp_path / "b/train.csv")
 
 
-def test_interrupted_run_resumes_to_the_same_result(tmp_path):
+AGENTS = {"plain": [], "D8": ["agent.group=D8"],
+          "octahedral-pointmass3d": ["env=pointmass3d", "agent.group=octahedral"]}
+
+
+@pytest.mark.parametrize("agent", AGENTS)
+def test_interrupted_run_resumes_to_the_same_result(tmp_path, agent):
     """Kill a run after its first checkpoint; the same command finishes it, and the
-    logs equal those of an uninterrupted run."""
-    args = [*TINY, "train.steps=3000", f"hydra.run.dir={tmp_path / 'resumed'}"]
+    logs equal those of an uninterrupted run (plain and equivariant agents)."""
+    args = [*TINY, *AGENTS[agent], "train.steps=3000", f"hydra.run.dir={tmp_path / 'resumed'}"]
     proc = subprocess.Popen([*TRAIN, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     state = tmp_path / "resumed/checkpoint/state.json"
@@ -69,7 +75,7 @@ def test_interrupted_run_resumes_to_the_same_result(tmp_path):
     finished = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300)
     assert finished.returncode == 0, finished.stderr
     assert "resuming" in finished.stdout
-    assert run(config("train.steps=3000"), tmp_path / "straight") == 0
+    assert run(config(*AGENTS[agent], "train.steps=3000"), tmp_path / "straight") == 0
     for table in ("eval.csv", "train.csv"):
         assert rows(tmp_path / "resumed" / table) == rows(tmp_path / "straight" / table), table
 
