@@ -20,11 +20,11 @@ import gymnasium  # noqa: E402
 from geomdp_envs import groups  # noqa: E402
 from geomdp_envs.augment import augment_transitions, default_augmentation_group  # noqa: E402
 from geomdp_envs.check import SymmetryReport, check_symmetry  # noqa: E402
-from geomdp_envs.mujoco_env import GeometricMujocoEnv, SimState  # noqa: E402
+from geomdp_envs.mujoco_env import GeometricMujocoEnv, PhysicsError, SimState  # noqa: E402
 from geomdp_envs.symmetry import Field, Symmetry  # noqa: E402
 
 __all__ = [
-    "Field", "GeometricMujocoEnv", "SimState", "Symmetry", "SymmetryReport", "TASKS",
+    "Field", "GeometricMujocoEnv", "PhysicsError", "SimState", "Symmetry", "SymmetryReport", "TASKS",
     "augment_transitions", "check_symmetry", "default_augmentation_group", "groups",
 ]
 

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from geomdp_envs import groups
-from geomdp_envs.symmetry import Symmetry
+from geomdp_envs.symmetry import Symmetry, as_float
 
 
 def default_augmentation_group(symmetry: Symmetry) -> str:
@@ -64,7 +64,8 @@ def _to_numpy(x: Any) -> Any:
 
 
 def _batched(matrices: np.ndarray, x: Any) -> Any:
-    """y[b] = matrices[b] @ x[b], keeping x's type, dtype and device."""
+    """y[b] = matrices[b] @ x[b], keeping x's type, device and float dtype (ints become float64)."""
+    x = as_float(x)
     if isinstance(x, np.ndarray):
         return np.einsum("bij,bj->bi", matrices, x).astype(x.dtype, copy=False)
     import torch

@@ -13,8 +13,10 @@ simulator state (``transform_state``), which is what ``check_symmetry`` needs.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import copy
 import importlib.util
+import numbers
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -52,6 +54,32 @@ def unknown_kwargs_error(env_name: str, unknown: dict[str, Any],
                                 "valid arguments: " + ", ".join(valid))
 
 
+class PhysicsError(RuntimeError):
+    """The simulation diverged (NaN, inf or a value beyond MuJoCo's 1e10 in the
+    state or its acceleration), as dm_control's PhysicsError: the state is
+    meaningless until the env is reset (or given a state with ``set_state``).
+    ``details`` holds MuJoCo's warnings."""
+
+    def __init__(self, message: str, details: str = "") -> None:
+        super().__init__(message)
+        self.details = details
+
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:  # keep details through pickle
+        return type(self), (self.args[0], self.details)
+
+
+def is_real_number(value: Any) -> bool:
+    """A Python or numpy int or float; not a bool, whose True is no size or count."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def positive_int(env_name: str, name: str, value: Any) -> int:
+    """``value`` as an int if it is an integer >= 1 (numpy ints too), else a ValueError."""
+    if not (is_real_number(value) and isinstance(value, numbers.Integral)) or value < 1:
+        raise ValueError(f"{env_name}: {name} must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
 class GeometricMujocoEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     """A Gymnasium env over a MuJoCo model, with a symmetry declaration."""
 
@@ -62,11 +90,18 @@ class GeometricMujocoEnv(gymnasium.Env[np.ndarray, np.ndarray]):
                  width: int, height: int, camera: str | int) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode={render_mode!r}; valid: None, 'rgb_array'")
+        self._render_size = (positive_int(self._name, "height", height),
+                             positive_int(self._name, "width", width))
+        # The offscreen framebuffer must hold the image (dm_control's is 640 x 480).
+        model.vis.global_.offheight = max(model.vis.global_.offheight, self._render_size[0])
+        model.vis.global_.offwidth = max(model.vis.global_.offwidth, self._render_size[1])
+        # A diverged simulation raises PhysicsError instead of being silently
+        # moved back to the origin, which is what MuJoCo's auto-reset does.
+        model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
         self.model = model
         self.data = mujoco.MjData(model)
         self.symmetry = symmetry
         self.render_mode = render_mode
-        self._render_size = (int(height), int(width))
         self._camera = camera
         self._renderer: mujoco.Renderer | None = None
         self.observation_space = spaces.Box(
@@ -75,6 +110,18 @@ class GeometricMujocoEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         if symmetry.action_size != model.nu:
             raise AssertionError("symmetry declaration does not match the model's actuators")
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.control_timestep))
+
+    @property
+    def _name(self) -> str:
+        """The task's name for error messages: ``PointMass3D`` for ``PointMass3DEnv``."""
+        return type(self).__name__.removesuffix("Env")
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Everything but the renderer, for pickle and copy.deepcopy: its GL context
+        cannot be copied, and a copy makes its own on its first ``render()``."""
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        return state
 
     # --- hooks for subclasses ------------------------------------------------
     def _initialize_episode(self, rng: np.random.Generator) -> None:
@@ -144,10 +191,29 @@ class GeometricMujocoEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         return SimState(self.data.qpos.copy(), self.data.qvel.copy(), self._task_state())
 
     def set_state(self, state: SimState) -> None:
-        self.data.qpos[:] = state.qpos
-        self.data.qvel[:] = state.qvel
-        self._set_task_state(state.task)
-        self._forward()
+        """Move the simulator to ``state``; a malformed or non-finite state raises a
+        ValueError naming the bad field and leaves the current state as it was."""
+        if not all(hasattr(state, name) for name in ("qpos", "qvel", "task")):
+            raise ValueError(f"{self._name}: set_state: state must be a SimState (qpos, qvel, "
+                             f"task) as get_state() returns, got {type(state).__name__}")
+        qpos = self._checked_vector("state.qpos", state.qpos, (self.model.nq,))
+        qvel = self._checked_vector("state.qvel", state.qvel, (self.model.nv,))
+        task = self._checked_task(state.task)
+        saved = self.get_state()
+        self._write_state(qpos, qvel, task)
+        try:
+            self._forward()
+        except PhysicsError as err:
+            self._write_state(saved.qpos, saved.qvel, saved.task)
+            with contextlib.suppress(PhysicsError):
+                self._forward()
+            raise ValueError(f"{self._name}: set_state: MuJoCo rejects the state "
+                             f"({err.details})") from None
+
+    def _write_state(self, qpos: np.ndarray, qvel: np.ndarray, task: dict[str, np.ndarray]) -> None:
+        self.data.qpos[:] = qpos
+        self.data.qvel[:] = qvel
+        self._set_task_state(task)
 
     def observe(self) -> np.ndarray:
         """The current observation in float64."""
@@ -160,6 +226,41 @@ class GeometricMujocoEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         return self._observation(), float(self._reward())
 
     # --- internals -----------------------------------------------------------
+    def _checked_task(self, task: Any) -> dict[str, np.ndarray]:
+        """``task`` checked against the keys and shapes of this task's parameters."""
+        expected = self._task_state()
+        valid = ", ".join(repr(key) for key in expected) or "none (an empty dict)"
+        if not isinstance(task, dict):
+            raise ValueError(f"{self._name}: set_state: state.task must be a dict, got "
+                             f"{type(task).__name__}; expected keys: {valid}")
+        missing = [key for key in expected if key not in task]
+        unknown = [key for key in task if key not in expected]
+        if missing or unknown:
+            what = (f"is missing {', '.join(map(repr, missing))}" if missing
+                    else f"has unknown {', '.join(map(repr, unknown))}")
+            raise ValueError(f"{self._name}: set_state: state.task {what}; expected keys: {valid}")
+        return {key: self._checked_vector(f"state.task[{key!r}]", task[key], expected[key].shape)
+                for key in expected}
+
+    def _checked_vector(self, label: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
+        """``value`` as a float64 array of ``shape`` whose entries MuJoCo accepts:
+        finite and within 1e10 (mjMAXVAL; beyond it MuJoCo treats the state as diverged)."""
+        try:
+            array = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{self._name}: set_state: {label} must be an array of numbers, "
+                             f"got {value!r}") from None
+        if array.shape != shape:
+            raise ValueError(f"{self._name}: set_state: {label} has shape {array.shape}, "
+                             f"expected {shape}")
+        bad = ~(np.abs(array) <= mujoco.mjMAXVAL)  # also true for NaN
+        if bad.any():
+            index = np.flatnonzero(bad)
+            raise ValueError(f"{self._name}: set_state: {label} has NaN, inf or |x| > "
+                             f"{mujoco.mjMAXVAL:.0e} at index {index[:5].tolist()}: "
+                             f"{array.ravel()[index[:5]].tolist()}")
+        return array
+
     def _validated_action(self, action: Any) -> np.ndarray:
         try:
             action = np.asarray(action, dtype=np.float64)
@@ -174,18 +275,47 @@ class GeometricMujocoEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     def _forward(self) -> None:
         # As dm_control's after_reset: recompute derived quantities with the
         # actuators off, since there is no meaningful control yet.
+        warnings_before = self.data.warning.number.tobytes()
+        messages: list[str] = []
+        previous = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(messages.append)
         self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_ACTUATION
         try:
             mujoco.mj_forward(self.model, self.data)
         finally:
             self.model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_ACTUATION)
+            mujoco.set_mju_user_warning(previous)
+        if messages or self.data.warning.number.tobytes() != warnings_before:
+            raise self._physics_error(warnings_before, messages)
 
     def _physics_step(self) -> None:
-        if self.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4:
-            mujoco.mj_step(self.model, self.data)
-        else:
-            mujoco.mj_step2(self.model, self.data)
-        mujoco.mj_step1(self.model, self.data)
+        # MuJoCo's own warning handler prints and writes MUJOCO_LOG.TXT into the
+        # working directory; here a warning becomes a PhysicsError instead, as in
+        # dm_control (which checks the same counters, data.warning, after a step).
+        warnings_before = self.data.warning.number.tobytes()
+        messages: list[str] = []
+        previous = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(messages.append)
+        try:
+            if self.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4:
+                mujoco.mj_step(self.model, self.data)
+            else:
+                mujoco.mj_step2(self.model, self.data)
+            mujoco.mj_step1(self.model, self.data)
+        finally:
+            mujoco.set_mju_user_warning(previous)
+        if messages or self.data.warning.number.tobytes() != warnings_before:
+            raise self._physics_error(warnings_before, messages)
+
+    def _physics_error(self, warnings_before: bytes, messages: list[str]) -> PhysicsError:
+        before = np.frombuffer(warnings_before, dtype=self.data.warning.number.dtype)
+        new = np.flatnonzero(self.data.warning.number > before)
+        details = [mujoco.mju_warningText(int(i), int(self.data.warning.lastinfo[i])) for i in new]
+        details = "; ".join(d.removesuffix(" The simulation is unstable.").rstrip(".")
+                            for d in details or messages)
+        return PhysicsError(f"{self._name}: the simulation diverged at t={self.data.time:.4f} s "
+                            f"({details}); call reset() or set_state() before stepping again",
+                            details)
 
 
 def load_triton_before_mesa() -> None:

@@ -240,15 +240,28 @@ class Symmetry:
         return "\n".join(rows)
 
 
+def as_float(x: Any) -> Any:
+    """x as a floating-point numpy array or torch tensor: float inputs keep their
+    dtype, integers (and bools, lists) become float64. A rotated integer vector
+    is not an integer vector, so casting the result back would truncate it."""
+    if not hasattr(x, "shape"):
+        return np.asarray(x, dtype=np.float64)
+    if isinstance(x, np.ndarray):
+        return x if np.issubdtype(x.dtype, np.inexact) else x.astype(np.float64)
+    import torch  # only for torch inputs; the declaration itself never needs torch
+
+    return x if x.is_floating_point() or x.is_complex() else x.to(torch.float64)
+
+
 def _apply(matrix: np.ndarray, x: Any, size: int, kind: str) -> Any:
     """x @ matrix.T for numpy arrays or torch tensors of shape [..., size]."""
-    if not hasattr(x, "shape"):
-        x = np.asarray(x, dtype=np.float64)
-    if x.shape[-1] != size:
-        raise ValueError(f"{kind} has last dimension {x.shape[-1]}, expected {size}")
+    x = as_float(x)
+    if x.ndim == 0 or x.shape[-1] != size:
+        last = "no last dimension" if x.ndim == 0 else f"last dimension {x.shape[-1]}"
+        raise ValueError(f"{kind} has {last}, expected {size}")
     if isinstance(x, np.ndarray):
         return (x @ matrix.T).astype(x.dtype, copy=False)
-    import torch  # only for torch inputs; the declaration itself never needs torch
+    import torch
 
     m = torch.as_tensor(matrix, dtype=x.dtype, device=x.device)
     return x @ m.T
