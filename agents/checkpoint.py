@@ -1,14 +1,24 @@
-"""Checkpoints that survive interruption: written whole or not at all, checked on load.
+"""Checkpoints that survive interruption and refuse what they cannot trust.
 
 A checkpoint is a directory ``checkpoint/`` in the run directory holding the
-agent (networks, target networks, optimisers, RNG), the replay buffer (TorchRL's
-``dumps``) and the loop state. It is written to ``checkpoint.tmp/`` and then
-swapped in by renames, so an interruption at any moment leaves either the old
-or the new checkpoint, never a half-written one.
+agent (parameters, target network, optimisers, RNG), the replay buffer
+(TorchRL's ``dumps``), the loop state and ``manifest.json``: the SHA-256 of
+every file and the run's options (seed included). It is written whole to
+``checkpoint.tmp/`` (the manifest last) and swapped in by renames, so a kill
+at any moment leaves a complete checkpoint under ``checkpoint/`` or
+``checkpoint.old/``; whatever an interrupted swap left behind is cleaned up
+by the next load or save. On load every file is checked against the
+manifest, and the options against the current run's: flipped bytes, a
+truncated or deleted file, or a checkpoint copied from another run (another
+seed) are refused with one line, and never overwritten.
+
+escnn's basis buffers are not written: they are rebuilt from the group when
+the agent is built, and they are most of an equivariant agent's bytes.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shutil
 from pathlib import Path
@@ -20,7 +30,8 @@ from torchrl.data import TensorDictReplayBuffer
 
 from agents.tdmpc import TDMPCAgent
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+MANIFEST = "manifest.json"
 
 
 class CheckpointError(RuntimeError):
@@ -31,42 +42,111 @@ def checkpoint_dir(run_dir: Path) -> Path:
     return run_dir / "checkpoint"
 
 
+def _paths(run_dir: Path) -> tuple[Path, Path, Path]:
+    return checkpoint_dir(run_dir), run_dir / "checkpoint.tmp", run_dir / "checkpoint.old"
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _files(root: Path) -> list[str]:
+    return sorted(str(p.relative_to(root)) for p in root.rglob("*") if p.is_file() and p.name != MANIFEST)
+
+
 def save(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
-         loop_state: dict[str, Any]) -> None:
-    final, tmp, old = (checkpoint_dir(run_dir), run_dir / "checkpoint.tmp",
-                       run_dir / "checkpoint.old")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir()
-    torch.save({"agent": agent.state_dict(), "torch_rng": torch.get_rng_state(),
-                "numpy_rng": np.random.get_state()}, tmp / "agent.pt")
-    buffer.dumps(tmp / "replay")
-    (tmp / "state.json").write_text(json.dumps({"format": FORMAT_VERSION, **loop_state},
-                                               indent=1))
-    if final.exists():
-        final.rename(old)
-    tmp.rename(final)
-    shutil.rmtree(old, ignore_errors=True)
-
-
-def load(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer) -> dict[str, Any] | None:
-    """Restore the agent and buffer in place; returns the loop state, or None if fresh."""
-    path = checkpoint_dir(run_dir)
-    if not path.exists() and (run_dir / "checkpoint.old").exists():
-        (run_dir / "checkpoint.old").rename(path)  # interrupted between the two renames
-    if not path.exists():
-        return None
+         loop_state: dict[str, Any], options: dict[str, Any] | None = None) -> None:
+    """Write a checkpoint atomically; ``options`` (the run's config) must match on load."""
+    final, tmp, old = _paths(run_dir)
     try:
-        state = json.loads((path / "state.json").read_text())
-        if state.get("format") != FORMAT_VERSION:
-            raise CheckpointError(f"format {state.get('format')}, expected {FORMAT_VERSION}")
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        torch.save({"agent": agent.state_dict(), "torch_rng": torch.get_rng_state(),
+                    "numpy_rng": np.random.get_state()}, tmp / "agent.pt")
+        buffer.dumps(tmp / "replay")
+        (tmp / "state.json").write_text(json.dumps({"format": FORMAT_VERSION, **loop_state}, indent=1))
+        manifest = {"format": FORMAT_VERSION, "options": options or {},
+                    "files": {name: _sha256(tmp / name) for name in _files(tmp)}}
+        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=1))
+        if final.exists():
+            if old.exists():  # left by a save interrupted after its swap
+                shutil.rmtree(old)
+            final.rename(old)
+        tmp.rename(final)
+        shutil.rmtree(old, ignore_errors=True)
+    except OSError as err:
+        raise CheckpointError(f"cannot write the checkpoint in {run_dir} ({err.strerror or err}); "
+                              "the previous checkpoint is intact: free space or fix permissions, "
+                              "then run the same command to continue") from None
+
+
+def recover(run_dir: Path) -> Path | None:
+    """The directory of the last complete checkpoint, after undoing an interrupted swap."""
+    final, tmp, old = _paths(run_dir)
+    if final.exists():
+        for stale in (old, tmp):
+            shutil.rmtree(stale, ignore_errors=True)
+        return final
+    if old.exists():  # interrupted between the two renames of a save
+        old.rename(final)
+        shutil.rmtree(tmp, ignore_errors=True)
+        return final
+    return None
+
+
+def verify(path: Path, options: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Check every file against the manifest, and the options; returns the loop state."""
+    manifest_path = path / MANIFEST
+    if not manifest_path.exists():
+        raise CheckpointError(f"checkpoint {path} has no {MANIFEST} (written by an older "
+                              "version, or damaged); delete it to start over")
+    try:
+        manifest = json.loads(manifest_path.read_text())
+        files = manifest["files"]
+    except (ValueError, KeyError, TypeError):
+        raise CheckpointError(f"checkpoint {path}: {MANIFEST} is unreadable; delete the "
+                              "checkpoint to start over") from None
+    if manifest.get("format") != FORMAT_VERSION:
+        raise CheckpointError(f"checkpoint {path} has format {manifest.get('format')}, expected "
+                              f"{FORMAT_VERSION}; delete it to start over")
+    missing = sorted(set(files) - set(_files(path)))
+    if missing:
+        raise CheckpointError(f"checkpoint {path} is incomplete: missing {', '.join(missing[:3])}; "
+                              "delete it to start over")
+    for name, digest in files.items():
+        if _sha256(path / name) != digest:
+            raise CheckpointError(f"checkpoint {path} is corrupted: {name} does not match its "
+                                  "checksum; delete it to start over")
+    if options is not None and manifest.get("options") != options:
+        diffs = _differences(manifest.get("options") or {}, options)
+        raise CheckpointError(f"checkpoint {path} belongs to another run ({'; '.join(diffs[:3])}); "
+                              "use that run's options, or delete the checkpoint to start over")
+    return json.loads((path / "state.json").read_text())
+
+
+def _differences(saved: dict[str, Any], current: dict[str, Any]) -> list[str]:
+    keys = sorted(set(saved) | set(current))
+    return [f"{k}: {saved.get(k)!r} there, {current.get(k)!r} here"
+            for k in keys if saved.get(k) != current.get(k)]
+
+
+def load(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
+         options: dict[str, Any] | None = None) -> dict[str, Any] | None:
+    """Restore the agent and buffer in place; returns the loop state, or None if fresh."""
+    path = recover(run_dir)
+    if path is None:
+        return None
+    state = verify(path, options)
+    try:
         saved = torch.load(path / "agent.pt", map_location=agent.device, weights_only=False)
         agent.load_state_dict(saved["agent"])
         buffer.loads(path / "replay")
-    except CheckpointError as err:
-        raise CheckpointError(f"checkpoint {path} cannot be used: {err}; delete it to start "
-                              "over, or choose another hydra.run.dir") from None
     except Exception as err:  # noqa: BLE001  (any failure to read means the same thing)
-        raise CheckpointError(f"checkpoint {path} is corrupted or from another agent "
+        raise CheckpointError(f"checkpoint {path} is from another agent or unreadable "
                               f"({type(err).__name__}: {str(err).splitlines()[0][:200]}); "
                               "delete it to start over, or choose another hydra.run.dir") from None
     torch.set_rng_state(saved["torch_rng"])

@@ -183,12 +183,31 @@ def expansion_scope(*modules: nn.Module) -> Iterator[None]:
             layer._scoped = saved
 
 
-def make_linear(in_layout: Layout, out_layout: Layout, bias: bool = True) -> nn.Module:
-    """``nn.Linear`` between plain layouts, ``EquivariantLinear`` between field types."""
+LINEAR_KINDS = ("dense", "fourier")
+
+
+def is_regular(layout: Layout) -> bool:
+    """Whether a layout is made only of regular fields (a hidden layer of an equivariant net)."""
+    return not isinstance(layout, int) and all(
+        rep.name == layout.gspace.fibergroup.regular_representation.name
+        for rep in layout.representations)
+
+
+def make_linear(in_layout: Layout, out_layout: Layout, bias: bool = True,
+                kind: str = "dense") -> nn.Module:
+    """``nn.Linear`` between plain layouts; between field types ``EquivariantLinear``
+    (escnn's dense expansion), or with ``kind="fourier"`` and regular fields on both
+    sides ``FourierLinear`` (the same maps, applied block-diagonally in the irrep basis)."""
+    if kind not in LINEAR_KINDS:
+        raise ValueError(f"layers={kind!r}; valid: {', '.join(LINEAR_KINDS)}")
     if isinstance(in_layout, int) and isinstance(out_layout, int):
         return nn.Linear(in_layout, out_layout, bias=bias)
     if isinstance(in_layout, int) or isinstance(out_layout, int):
         raise TypeError("a linear layer maps plain to plain or field type to field type")
+    if kind == "fourier" and is_regular(in_layout) and is_regular(out_layout):
+        from agents.fourier import FourierLinear
+
+        return FourierLinear(in_layout, out_layout, bias=bias)
     # Biases start as nn.Linear's do (uniform, +-1/sqrt(fan_in)), not at escnn's zero:
     # an equivariant map from vector fields has zero mean over its output channels,
     # so with zero biases the LayerNorm after it would divide out |input| entirely.

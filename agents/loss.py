@@ -43,6 +43,16 @@ class LossConfig:
     policy_noise: float = 0.05  # TD-MPC's min_std: pi's noise in the TD target, pi loss and planner
     noise_clip: float = 0.3  # TD-MPC clips that noise to +-0.3 (by norm for a vector field)
 
+    def __post_init__(self) -> None:
+        for name in ("consistency_coef", "reward_coef", "value_coef", "policy_noise"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"loss.{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("rho", "discount"):
+            if not 0 < getattr(self, name) <= 1:
+                raise ValueError(f"loss.{name} must be in (0, 1], got {getattr(self, name)}")
+        if not self.noise_clip > 0:
+            raise ValueError(f"loss.noise_clip must be > 0, got {self.noise_clip}")
+
 
 class TDMPCLoss(LossModule):
     """TD-MPC's losses over a [batch, horizon] TensorDict of transitions.

@@ -26,6 +26,8 @@ from torch import nn
 
 from agents.groups import AgentGroup, field_type, group_for_task
 from agents.layers import (
+    ACTIVATIONS,
+    LINEAR_KINDS,
     FieldLayerNorm,
     Layout,
     activation,
@@ -52,11 +54,25 @@ class NetworkConfig:
     num_q: int = 2
     equivariant: dict[str, bool] = field(
         default_factory=lambda: {name: True for name in COMPONENTS})
+    # Hidden-to-hidden equivariant layers: dense (escnn's expanded matrix), fourier
+    # (block-diagonal in the irrep basis), or auto: fourier for sqrt width, where it
+    # is faster, dense for linear width (few fields), where it is not (BENCHMARKS.md).
+    layers: str = "auto"
 
     def __post_init__(self) -> None:
         if self.width_strategy not in WIDTH_STRATEGIES:
             raise ValueError(f"width_strategy={self.width_strategy!r}; valid: "
                              f"{', '.join(WIDTH_STRATEGIES)}")
+        if self.layers not in ("auto", *LINEAR_KINDS):
+            raise ValueError(f"layers={self.layers!r}; valid: auto, {', '.join(LINEAR_KINDS)}")
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"activation={self.activation!r}; valid: {', '.join(ACTIVATIONS)}")
+
+    def linear_kind(self) -> str:
+        """The hidden layers' kind once ``auto`` is decided."""
+        if self.layers != "auto":
+            return self.layers
+        return "fourier" if self.width_strategy == "sqrt" else "dense"
         for name in ("latent_dim", "hidden_dim", "hidden_layers", "num_q"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
@@ -79,11 +95,11 @@ class FieldMLP(nn.Module):
     """
 
     def __init__(self, in_layout: Layout, hidden: list[Layout], out_layout: Layout,
-                 activation_name: str = "elu") -> None:
+                 activation_name: str = "elu", linear_kind: str = "dense") -> None:
         super().__init__()
         layers, previous = [], in_layout
         for layout in hidden:
-            layers += [make_linear(previous, layout), FieldLayerNorm(layout),
+            layers += [make_linear(previous, layout, kind=linear_kind), FieldLayerNorm(layout),
                        activation(activation_name)]
             previous = layout
         layers.append(make_linear(previous, out_layout))
@@ -133,7 +149,7 @@ class Space:
 
     def mlp(self, in_layout: Layout, out_layout: Layout) -> FieldMLP:
         return FieldMLP(in_layout, [self.hidden] * self.config.hidden_layers, out_layout,
-                        self.config.activation)
+                        self.config.activation, self.config.linear_kind())
 
 
 def squash(x: torch.Tensor, fields: tuple[Field, ...]) -> torch.Tensor:

@@ -42,6 +42,13 @@ class PlannerConfig:
         for name in ("iterations", "num_samples", "num_elites"):
             if getattr(self, name) < 1:
                 raise ValueError(f"planner.{name} must be >= 1, got {getattr(self, name)}")
+        if self.num_pi_trajs < 0:
+            raise ValueError(f"planner.num_pi_trajs must be >= 0, got {self.num_pi_trajs}")
+        for name in ("temperature", "max_std", "discount"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"planner.{name} must be > 0, got {getattr(self, name)}")
+        if not 0 <= self.momentum < 1:
+            raise ValueError(f"planner.momentum must be in [0, 1), got {self.momentum}")
         if self.num_elites > self.num_samples + self.num_pi_trajs:
             raise ValueError(f"planner.num_elites ({self.num_elites}) exceeds the number of "
                              f"sampled trajectories ({self.num_samples + self.num_pi_trajs})")

@@ -24,6 +24,12 @@ class CsvTable:
         if not path.exists():
             with path.open("w", newline="") as f:
                 csv.writer(f).writerow(columns)
+        else:
+            with path.open(newline="") as f:
+                header = next(csv.reader(f), [])
+            if header != columns:
+                raise ValueError(f"{path} has other columns than this version writes "
+                                 "(made by an older version?): use another hydra.run.dir")
 
     def append(self, row: dict[str, float]) -> None:
         with self.path.open("a", newline="") as f:
@@ -61,6 +67,7 @@ class RunLog:
     """Writes the run's tables and forwards every value to TorchRL's loggers."""
 
     def __init__(self, run_dir: Path, tensorboard: str | bool = "auto") -> None:
+        self.run_dir = run_dir
         self.eval = CsvTable(run_dir / "eval.csv", EVAL_COLUMNS)
         self.train = CsvTable(run_dir / "train.csv", TRAIN_COLUMNS)
         self.loggers: list[Logger] = [CSVLogger(exp_name="torchrl_csv", log_dir=str(run_dir))]
@@ -72,6 +79,14 @@ class RunLog:
             self.loggers.append(TensorboardLogger(exp_name="tensorboard", log_dir=str(run_dir)))
 
     def truncate_after(self, env_step: int) -> int:
+        """Drop rows logged after ``env_step`` (-1: all), TorchRL's CSV files included;
+        returns how many rows of the two tables were dropped. TensorBoard event files
+        cannot be trimmed: a resumed run's steps appear there twice."""
+        for path in (self.run_dir / "torchrl_csv").rglob("*.csv"):
+            lines = path.read_text().splitlines(keepends=True)
+            kept = [line for line in lines if int(float(line.split(",", 1)[0])) <= env_step]
+            if len(kept) != len(lines):
+                path.write_text("".join(kept))
         return self.eval.truncate_after(env_step) + self.train.truncate_after(env_step)
 
     def log(self, table: str, row: dict[str, float]) -> None:

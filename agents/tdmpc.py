@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import typing
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -17,6 +18,8 @@ from agents.planner import MPPIPlanner, NoiseSource, PlannerConfig
 from agents.replay import ReplayConfig
 from agents.world_model import WorldModel
 from geomdp_envs.symmetry import Symmetry
+
+REBUILT = "_basisexpansion"  # escnn's basis buffers, in every equivariant layer
 
 
 @dataclass
@@ -52,11 +55,18 @@ class TDMPCConfig:
     grad_clip_norm: float = 10.0
 
     def __post_init__(self) -> None:
-        for name in ("horizon", "batch_size", "target_update_every"):
+        for name in ("horizon", "batch_size", "target_update_every", "horizon_schedule"):
             if getattr(self, name) < 1:
                 raise ValueError(f"agent.{name} must be >= 1, got {getattr(self, name)}")
         if not 0 < self.tau <= 1:
             raise ValueError(f"agent.tau must be in (0, 1], got {self.tau}")
+        for name in ("lr", "grad_clip_norm"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"agent.{name} must be > 0, got {getattr(self, name)}")
+        if self.replay.capacity < self.batch_size * self.horizon:
+            raise ValueError(f"agent.replay.capacity ({self.replay.capacity}) must hold at least "
+                             f"one batch of slices (batch_size x horizon = "
+                             f"{self.batch_size * self.horizon})")
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TDMPCConfig:
@@ -74,9 +84,24 @@ class TDMPCConfig:
                 if unknown:
                     raise ValueError(f"unknown agent.{key} option(s) {sorted(unknown)}; valid: "
                                      + ", ".join(sorted(valid)))
+                for name, item in value.items():
+                    _check_type(nested[key], name, item, f"agent.{key}.")
                 value = nested[key](**value)
+            else:
+                _check_type(cls, key, value, "agent.")
             kwargs[key] = value
         return cls(**kwargs)
+
+
+def _check_type(cls: type, name: str, value: Any, prefix: str) -> None:
+    """Refuse a value of the wrong type for a dataclass field (ints are floats; bools are not numbers)."""
+    expected = typing.get_type_hints(cls)[name]
+    ok = {int: lambda v: isinstance(v, int) and not isinstance(v, bool),
+          float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
+          bool: lambda v: isinstance(v, bool), str: lambda v: isinstance(v, str)}.get(expected)
+    if ok is not None and not ok(value):
+        what = {int: "an integer", float: "a number", bool: "true or false", str: "a string"}[expected]
+        raise ValueError(f"{prefix}{name} must be {what}, got {value!r}")
 
 
 class TDMPCAgent:
@@ -152,13 +177,20 @@ class TDMPCAgent:
         return float(gap / torch.stack(torch._foreach_norm(online)).norm())
 
     def state_dict(self) -> dict[str, Any]:
-        return {"loss": self.loss.state_dict(),
+        # escnn's basis buffers are rebuilt with the networks: most of an equivariant
+        # agent's bytes, and nothing a run changes.
+        networks = {k: v for k, v in self.loss.state_dict().items() if REBUILT not in k}
+        return {"loss": networks,
                 "model_optimizer": self.model_optimizer.state_dict(),
                 "policy_optimizer": self.policy_optimizer.state_dict(),
                 "generator": self.generator.get_state(), "updates": self.updates}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.loss.load_state_dict(state["loss"])
+        missing, unexpected = self.loss.load_state_dict(state["loss"], strict=False)
+        missing = [k for k in missing if REBUILT not in k]
+        if missing or unexpected:
+            raise ValueError(f"the saved networks do not fit this agent (missing "
+                             f"{missing[:3]}, unexpected {unexpected[:3]})")
         self.model_optimizer.load_state_dict(state["model_optimizer"])
         self.policy_optimizer.load_state_dict(state["policy_optimizer"])
         self.generator.set_state(state["generator"])

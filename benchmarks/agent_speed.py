@@ -3,100 +3,118 @@
 TD-MPC makes one gradient update per agent step, so an agent step costs one
 ``plan`` (MPPI over the latent model) and one ``update`` (a batch of
 horizon-length slices). For the CPU preset (``configs/agent/tdmpc.yaml``) this
-measures both for the plain agent and for D8 (PointMass2D) and icosahedral
-(PointMass3D) agents under both width strategies, and prints ratios to the
-plain agent on the same task. It also counts the planner's FLOPs (the expanded
-linear layers it evaluates) and compares its achieved FLOP rate with that of a
-plain matrix product of the planner's batch and width on this machine.
+measures both for the plain agent, D8 (PointMass2D) and icosahedral
+(PointMass3D) agents with both width strategies, the ``sqrt`` ones with their
+hidden layers dense (escnn's expanded matrix: the reference) and in the irrep
+basis (``FourierLinear``: the default), and prints ratios to the plain agent on
+the same task. It also counts the planner's FLOPs (as the dense expanded
+layers it stands for) and compares its achieved FLOP rate with that of a plain
+matrix product of the planner's batch and width.
 
-    python benchmarks/agent_speed.py [--threads 1] [--preset tdmpc]
+Every configuration is measured in a fresh process, so none inherits another's
+warm-up, allocator or thread state. ``--baseline DIR`` also measures the plain
+agent of another checkout (e.g. ``git worktree add /tmp/landed <commit>``) in
+the same run, for "faster than before" ratios.
+
+    python benchmarks/agent_speed.py [--threads 1] [--preset tdmpc] [--baseline /tmp/landed]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
-import time
+import subprocess
+import sys
+from pathlib import Path
 
-import gymnasium
-import torch
+ROOT = Path(__file__).resolve().parent.parent
+
+# (task, label, agent overrides) in the order printed; the first of a task is its plain agent.
+CONFIGS = [
+    ("pointmass2d", "plain", ["agent.group=none"]),
+    ("pointmass2d", "D8 linear", ["agent.group=D8", "agent.width_strategy=linear"]),
+    ("pointmass2d", "D8 sqrt (irrep basis)", ["agent.group=D8", "agent.width_strategy=sqrt",
+                                              "agent.networks.layers=fourier"]),
+    ("pointmass2d", "D8 sqrt (dense, reference)", ["agent.group=D8", "agent.width_strategy=sqrt",
+                                                   "agent.networks.layers=dense"]),
+    ("pointmass3d", "plain", ["agent.group=none"]),
+    ("pointmass3d", "icosahedral linear", ["agent.group=icosahedral", "agent.width_strategy=linear"]),
+    ("pointmass3d", "icosahedral sqrt (irrep basis)", ["agent.group=icosahedral",
+                                                       "agent.width_strategy=sqrt",
+                                                       "agent.networks.layers=fourier"]),
+    ("pointmass3d", "icosahedral sqrt (dense, reference)", ["agent.group=icosahedral",
+                                                            "agent.width_strategy=sqrt",
+                                                            "agent.networks.layers=dense"]),
+]
+
+# Runs inside the measured checkout (its own agents package), with only the APIs
+# that every version of it has; prints one JSON line.
+MEASURE = r"""
+import json, sys, time, gymnasium, torch
+torch.set_num_threads(int(sys.argv[1])); torch.manual_seed(0)
+gymnasium.logger.min_level = 40
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
-
-import geomdp_envs  # noqa: F401
+import geomdp_envs
 from agents import train
-from agents.layers import EquivariantLinear
 from agents.replay import make_replay_buffer, sample_slices
-from agents.tdmpc import TDMPCAgent, TDMPCConfig
-from agents.train import CONFIG_DIR, REPLAY_KEYS, make_env
-
-TASKS = {"PointMass2D": ("pointmass2d", ["none", "D8"]),
-         "PointMass3D": ("pointmass3d", ["none", "icosahedral"])}
-
-
-def agent_config(preset: str, group: str, strategy: str) -> TDMPCConfig:
-    """The agent options ``geomdp-train agent=<preset>`` would use."""
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = compose("train", overrides=[f"agent={preset}", f"agent.group={group}",
-                                          f"agent.width_strategy={strategy}"])
-    return train.agent_config(cfg)
-
-
-def linear_flops(module: torch.nn.Module) -> int:
-    """FLOPs of one sample through every linear layer of ``module``."""
-    total = 0
-    for m in module.modules():
-        if isinstance(m, torch.nn.Linear):
-            total += 2 * m.in_features * m.out_features
-        elif isinstance(m, EquivariantLinear):
-            total += 2 * m.in_type.size * m.out_type.size
-    return total
-
-
-def planner_flops(agent: TDMPCAgent) -> float:
-    cfg, model, h = agent.config.planner, agent.model, agent.config.horizon
-    n = cfg.num_samples + cfg.num_pi_trajs
-    step = linear_flops(model.dynamics) + linear_flops(model.reward_net)
-    terminal = linear_flops(model.policy) + linear_flops(model.qs)
-    pi_rollout = cfg.num_pi_trajs * h * (linear_flops(model.policy) + linear_flops(model.dynamics))
-    return linear_flops(model.encoder) + pi_rollout + cfg.iterations * n * (h * step + terminal)
-
-
-def timed(fn, repeats: int) -> float:  # noqa: ANN001
-    fn()
+from agents.tdmpc import TDMPCAgent
+task, repeats, overrides = sys.argv[2], int(sys.argv[3]), sys.argv[4:]
+with initialize_config_dir(config_dir=str(train.CONFIG_DIR), version_base="1.3"):
+    cfg = compose("train", overrides=[f"env={task}", *overrides])
+agent_cfg = train.agent_config(cfg)
+env, symmetry = train.make_env(cfg.env)
+obs_size = env.observation_spec["observation"].shape[-1]
+agent = TDMPCAgent(agent_cfg, symmetry, obs_size, env.action_spec.shape[-1])
+buffer = make_replay_buffer(agent_cfg.replay, agent_cfg.horizon, agent_cfg.batch_size)
+td = env.rollout(1000, break_when_any_done=True)
+td.set("episode", torch.zeros(td.shape[0], dtype=torch.int64))
+buffer.extend(td.select(*train.REPLAY_KEYS))
+obs = td["observation"][0]
+def timed(fn):
+    for _ in range(3):
+        fn()
     start = time.perf_counter()
     for _ in range(repeats):
         fn()
     return (time.perf_counter() - start) / repeats
+plan = timed(lambda: agent.act(obs, step=10**6, explore=True))
+update = timed(lambda: agent.update(sample_slices(buffer, agent_cfg.horizon)))
+def dense_flops(module):
+    total = 0
+    for m in module.modules():
+        if isinstance(m, torch.nn.Linear):
+            total += 2 * m.in_features * m.out_features
+        elif hasattr(m, "in_type") and hasattr(m, "out_type"):
+            total += 2 * m.in_type.size * m.out_type.size
+    return total
+p, m, h = agent_cfg.planner, agent.model, agent_cfg.horizon
+n = p.num_samples + p.num_pi_trajs
+flops = (dense_flops(m.encoder) + p.num_pi_trajs * h * (dense_flops(m.policy) + dense_flops(m.dynamics))
+         + p.iterations * n * (h * (dense_flops(m.dynamics) + dense_flops(m.reward_net))
+                               + dense_flops(m.policy) + dense_flops(m.qs)))
+hidden = next(x for x in agent.networks.dynamics.modules() if hasattr(x, "out_type")
+              or isinstance(x, torch.nn.Linear))
+width = hidden.out_type.size if hasattr(hidden, "out_type") else hidden.out_features
+a, b = torch.randn(n, width), torch.randn(width, width)
+matmul = timed(lambda: a @ b)
+print(json.dumps({"plan": plan, "update": update, "width": width,
+                  "planner_gflops": flops / plan / 1e9,
+                  "matmul_gflops": 2 * n * width * width / matmul / 1e9}))
+"""
 
 
-def matmul_rate(rows: int, width: int) -> float:
-    """GFLOP/s of a plain [rows, width] @ [width, width] product."""
-    a, b = torch.randn(rows, width), torch.randn(width, width)
-    seconds = timed(lambda: a @ b, 50)
-    return 2 * rows * width * width / seconds / 1e9
-
-
-def measure(task: str, group: str, strategy: str, preset: str, repeats: int) -> dict[str, float]:
-    env_cfg = OmegaConf.load(CONFIG_DIR / "env" / f"{task}.yaml")
-    env, symmetry = make_env(env_cfg)
-    cfg = agent_config(preset, group, strategy)
-    obs_size = env.observation_spec["observation"].shape[-1]
-    agent = TDMPCAgent(cfg, symmetry, obs_size, env.action_spec.shape[-1])
-    buffer = make_replay_buffer(cfg.replay, cfg.horizon, cfg.batch_size)
-    td = env.rollout(1000, break_when_any_done=True)
-    td.set("episode", torch.zeros(td.shape[0], dtype=torch.int64))
-    buffer.extend(td.select(*REPLAY_KEYS))
-    obs = td["observation"][0]
-    plan = timed(lambda: agent.act(obs, step=10**6, explore=True), repeats)
-    update = timed(lambda: agent.update(sample_slices(buffer, cfg.horizon)), repeats)
-    hidden = agent.networks.dynamics.net[0]
-    width = hidden.out_type.size if isinstance(hidden, EquivariantLinear) else hidden.out_features
-    n = cfg.planner.num_samples + cfg.planner.num_pi_trajs
-    return {"plan": plan, "update": update, "steps_per_s": 1 / (plan + update),
-            "planner_gflops": planner_flops(agent) / plan / 1e9,
-            "matmul_gflops": matmul_rate(n, width), "width": width}
+def measure(tree: Path, task: str, overrides: list[str], threads: int, preset: str,
+            repeats: int) -> dict[str, float]:
+    out = subprocess.run([sys.executable, "-c", MEASURE, str(threads), task, str(repeats),
+                          f"agent={preset}", *overrides],
+                         cwd=tree, capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": str(tree), "RL_WARNINGS": "False"})
+    if out.returncode != 0:
+        raise SystemExit(f"measuring {task} {overrides} in {tree} failed:\n{out.stderr[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def main() -> None:
@@ -104,26 +122,34 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--preset", default="tdmpc", help="agent config: tdmpc (CPU), tdmpc_paper")
     parser.add_argument("--repeats", type=int, default=10)
+    parser.add_argument("--baseline", type=Path, default=None,
+                        help="another checkout whose plain PointMass2D agent to measure alongside")
     args = parser.parse_args()
-    torch.set_num_threads(args.threads)
-    torch.manual_seed(0)
-    gymnasium.logger.min_level = 40
+    import torch
+
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, torch {torch.__version__}, "
           f"{args.threads} thread(s); agent preset {args.preset}\n")
-    print("| task | agent | hidden width | plan (ms) | update (ms) | agent steps/s (x plain) "
-          "| planner GFLOP/s | matmul GFLOP/s, same size |")
-    print("|---|---|---|---|---|---|---|---|")
-    for name, (task, group_names) in TASKS.items():
-        plain = None
-        for group in group_names:
-            for strategy in (["sqrt"] if group == "none" else ["sqrt", "linear"]):
-                r = measure(task, group, strategy, args.preset, args.repeats)
-                plain = plain or r
-                label = "plain" if group == "none" else f"{group} {strategy}"
-                print(f"| {name} | {label} | {r['width']} | {r['plan'] * 1e3:.1f} "
-                      f"| {r['update'] * 1e3:.1f} | {r['steps_per_s']:.1f} "
-                      f"({r['steps_per_s'] / plain['steps_per_s']:.2f}) "
-                      f"| {r['planner_gflops']:.1f} | {r['matmul_gflops']:.1f} |")
+    print("| task | agent | hidden width | plan (ms) | update (ms) | agent step (ms) | x plain step "
+          "| planner GFLOP/s (dense-equivalent) | matmul GFLOP/s, same size |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    plain: dict[str, float] = {}
+    for task, label, overrides in CONFIGS:
+        r = measure(ROOT, task, overrides, args.threads, args.preset, args.repeats)
+        step = r["plan"] + r["update"]
+        plain.setdefault(task, step)
+        print(f"| {task} | {label} | {r['width']} | {r['plan'] * 1e3:.1f} | {r['update'] * 1e3:.1f} "
+              f"| {step * 1e3:.1f} | {step / plain[task]:.2f} | {r['planner_gflops']:.1f} "
+              f"| {r['matmul_gflops']:.1f} |", flush=True)
+    if args.baseline:
+        r = measure(args.baseline, "pointmass2d", ["agent.group=none"], args.threads, args.preset,
+                    args.repeats)
+        now = measure(ROOT, "pointmass2d", ["agent.group=none"], args.threads, args.preset,
+                      args.repeats)
+        before, after = r["plan"] + r["update"], now["plan"] + now["update"]
+        print(f"\nplain PointMass2D agent step: {args.baseline}: {before * 1e3:.1f} ms "
+              f"(plan {r['plan'] * 1e3:.1f}, update {r['update'] * 1e3:.1f}); this checkout: "
+              f"{after * 1e3:.1f} ms (plan {now['plan'] * 1e3:.1f}, update "
+              f"{now['update'] * 1e3:.1f}); speed-up {before / after:.2f}x")
 
 
 if __name__ == "__main__":

@@ -1,10 +1,11 @@
 """Replay a trained run's agent from its checkpoint and show where episodes end.
 
-    python examples/inspect_run.py results/learning_check/pointmass2d/D8/seed2 [--episodes 4]
+    python examples/inspect_run.py results/pointmass2d_cpu/D8/seed2 [--episodes 4] [--video out.mp4]
 
 Prints, per episode, the first two observation coordinates at the start and
 at the end (for PointMass2D: the mass's position) and the return, with the
-planner in evaluation mode (no exploration noise).
+planner in evaluation mode (no exploration noise). ``--video`` writes the
+first episode as an MP4 (rendered headless).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from agents import checkpoint
 from agents.replay import make_replay_buffer
 from agents.tdmpc import TDMPCAgent
 from agents.train import agent_config, make_gym_env
+from agents.video import frames_per_second, write_video
 
 
 def main() -> None:
@@ -27,11 +29,12 @@ def main() -> None:
     parser.add_argument("run_dir", type=Path)
     parser.add_argument("--episodes", type=int, default=4)
     parser.add_argument("--seed", type=int, default=500)
+    parser.add_argument("--video", type=Path, default=None, help="write the first episode to this MP4")
     args = parser.parse_args()
     torch.set_num_threads(1)
     cfg = OmegaConf.load(args.run_dir / "config.yaml")
     agent_cfg = agent_config(cfg)
-    env = make_gym_env(cfg.env)
+    env = make_gym_env(cfg.env, render_mode="rgb_array" if args.video else None)
     sym = getattr(env.unwrapped, "symmetry", None)
     agent = TDMPCAgent(agent_cfg, sym, env.observation_space.shape[0], env.action_space.shape[0])
     state = checkpoint.load(args.run_dir, agent, make_replay_buffer(
@@ -42,8 +45,11 @@ def main() -> None:
     for episode in range(args.episodes):
         obs, _ = env.reset(seed=args.seed + episode)
         start, total, done = obs[:2].copy(), 0.0, False
+        frames = [] if args.video and episode == 0 else None
         agent.planner.reset()
         while not done:
+            if frames is not None:
+                frames.append(env.render())
             action = agent.act(torch.as_tensor(obs), state["agent_step"], explore=False).numpy()
             for _ in range(int(cfg.env.action_repeat)):
                 obs, reward, terminated, truncated, _ = env.step(action)
@@ -53,6 +59,10 @@ def main() -> None:
                     break
         print(f"episode {episode}: start {np.round(start, 3)} end {np.round(obs[:2], 3)} "
               f"return {total:.1f}")
+        if frames is not None:
+            frames.append(env.render())
+            fps = frames_per_second(env, int(cfg.env.action_repeat))
+            print(f"video: {write_video(args.video, frames, fps)} ({len(frames)} frames)")
 
 
 if __name__ == "__main__":

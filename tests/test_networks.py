@@ -295,3 +295,27 @@ def test_gradients_are_finite_with_states_exactly_on_target(group_name, task):
     (losses["loss_model"] + losses["loss_pi"]).backward()
     grads = [p.grad for p in loss.model.parameters() if p.grad is not None]
     assert grads and all(torch.isfinite(g).all() for g in grads)
+
+
+@pytest.mark.parametrize("group_name, task", [("D8", "pointmass2d"), ("octahedral", "pointmass3d")])
+def test_irrep_basis_layers_give_the_same_networks_as_dense_ones(group_name, task, randomise_heads):
+    """layers=fourier (auto for sqrt width) and layers=dense: the same parameter counts,
+    and both exactly equivariant."""
+    from agents.fourier import FourierLinear
+
+    sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
+    counts = {}
+    for kind in ("dense", "fourier"):
+        nets = randomise_heads(build_networks(
+            NetworkConfig(group=group_name, width_strategy="sqrt", layers=kind, **SMALL), sym))
+        counts[kind] = nets.parameter_counts()
+        uses_fourier = any(isinstance(m, FourierLinear) for m in nets.dynamics.modules())
+        assert uses_fourier == (kind == "fourier")
+        net = nets.dynamics
+        x = torch.randn(16, net.in_layout.size)
+        for e in elements_of(nets.group, max_elements=6):
+            err = relative_error(net(x @ rep(net.in_layout, e).T), net(x) @ rep(net.out_layout, e).T)
+            assert err < 1e-4, (kind, e, err)
+    assert counts["dense"] == counts["fourier"]
+    assert NetworkConfig(width_strategy="sqrt").linear_kind() == "fourier"
+    assert NetworkConfig(width_strategy="linear").linear_kind() == "dense"

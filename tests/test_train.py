@@ -102,20 +102,36 @@ def test_changed_options_are_refused_on_resume(tmp_path, capsys):
     (["env=reacher", "agent.group=octahedral"], "acts in 3D but the task is 2D"),
     (["env=pointmass3d", "agent.group=D8"], "acts in 2D but the task is 3D"),
     (["env=Pendulum-v1", "agent.group=D4"], "needs a task that declares its symmetry"),
-    (["train.steps=0"], "train.steps must be a positive integer"),
+    (["train.steps=0"], "train.steps must be >= 1, got 0"),
     (["env=pointmass3d", "env.n_balls=0"], "n_balls must be an integer >= 1"),
     (["env=reacher", "env.frame=body"], "frame='body'; valid: 'local', 'global'"),
     (["agent.width_strategy=cube"], "width_strategy='cube'; valid: sqrt, linear"),
     (["+agent.planner.samples=3"], "unknown agent.planner option"),
+    (["train.steps=abc"], "train.steps must be an integer, got 'abc'"),
+    (["train.steps=2.5"], "train.steps must be an integer, got 2.5"),
+    (["seed=abc"], "seed must be an integer, got 'abc'"),
+    (["seed=1.5"], "seed must be an integer, got 1.5"),
+    (["+train.stepz=100"], "unknown option train.stepz; valid:"),
+    (["+foo=1"], "unknown option 'foo'"),
+    (["agent.lr=-1"], "agent.lr must be > 0, got -1"),
+    (["agent.lr=fast"], "agent.lr must be a number, got 'fast'"),
+    (["agent.networks.activation=swish"], "activation='swish'; valid: mish, elu"),
+    (["agent.networks.layers=sparse"], "layers='sparse'; valid: auto, dense, fourier"),
+    (["agent.planner.num_pi_trajs=-3"], "planner.num_pi_trajs must be >= 0, got -3"),
+    (["agent.replay.capacity=2"], "agent.replay.capacity (2) must hold at least one batch"),
+    (["logger.tensorboard=maybe"], "logger.tensorboard='maybe'; valid: true, false, auto"),
+    (["train.video=yes"], "train.video must be true or false, got 'yes'"),
 ])
 def test_bad_input_fails_fast_with_one_clear_line(overrides, message, tmp_path):
     start = time.time()
-    out = subprocess.run([*TRAIN, *TINY, *overrides, f"hydra.run.dir={tmp_path}"],
+    run_dir = tmp_path / "run"
+    out = subprocess.run([*TRAIN, *TINY, *overrides, f"hydra.run.dir={run_dir}"],
                          capture_output=True, text=True, timeout=120)
-    assert out.returncode != 0
+    assert out.returncode == 2
     errors = [line for line in out.stderr.splitlines() if line.startswith("geomdp-train: error")]
     assert len(errors) == 1 and message in errors[0], out.stderr
-    assert not (tmp_path / "checkpoint").exists()
+    assert "Traceback" not in out.stderr
+    assert not run_dir.exists(), "a refused run leaves no directory"
     assert time.time() - start < 60
 
 

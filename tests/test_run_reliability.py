@@ -1,0 +1,193 @@
+"""Interruptions, damaged checkpoints and bad run directories: nothing lost, one clear line."""
+
+import json
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import imageio.v2 as imageio
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from test_train import TINY, TRAIN, config, rows
+
+from agents import checkpoint
+from agents.train import CONFIG_DIR, run, sweep_dirname, usable_cores
+
+LOGS = ("eval.csv", "train.csv")
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def torchrl_steps(run_dir):
+    """The steps in every TorchRL CSV file (one file per scalar)."""
+    return {str(p.relative_to(run_dir)): [line.split(",")[0] for line in p.read_text().splitlines()]
+            for p in sorted((run_dir / "torchrl_csv").rglob("*.csv"))}
+
+
+@pytest.fixture(scope="module")
+def straight(tmp_path_factory):
+    """An uninterrupted 3000-step run, the reference for every resumed one."""
+    path = tmp_path_factory.mktemp("straight")
+    assert run(config("train.steps=3000"), path) == 0
+    return path
+
+
+def assert_same_logs(run_dir, reference):
+    for table in LOGS:
+        assert rows(run_dir / table) == rows(reference / table), table
+    assert torchrl_steps(run_dir) == torchrl_steps(reference)
+
+
+def test_logs_without_a_checkpoint_start_over(tmp_path, straight):
+    """Killed before the first checkpoint, or the checkpoint deleted: the rerun starts
+    over and its logs hold one run, not two."""
+    assert run(config("train.steps=2000"), tmp_path) == 0
+    shutil.rmtree(tmp_path / "checkpoint")
+    assert run(config("train.steps=3000"), tmp_path) == 0
+    assert_same_logs(tmp_path, straight)
+
+
+@pytest.mark.parametrize("leftover", ["swap_interrupted", "stale_old", "stale_tmp"])
+def test_every_state_an_interrupted_save_leaves_resumes(tmp_path, straight, leftover):
+    assert run(config("train.steps=2000"), tmp_path) == 0
+    final, old, tmp = (tmp_path / n for n in ("checkpoint", "checkpoint.old", "checkpoint.tmp"))
+    if leftover == "swap_interrupted":  # killed between the two renames of a save
+        shutil.copytree(final, tmp)
+        final.rename(old)
+    elif leftover == "stale_old":  # killed after the swap, before the old one was removed
+        shutil.copytree(final, old)
+    else:
+        shutil.copytree(final, tmp)
+    assert run(config("train.steps=3000"), tmp_path) == 0
+    assert_same_logs(tmp_path, straight)
+    assert not old.exists() and not tmp.exists()
+
+
+def flip_byte(path):
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def truncate(path):
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda c: flip_byte(c / "agent.pt"), "agent.pt does not match its checksum"),
+    (lambda c: flip_byte(c / "replay/storage/observation.memmap"), "observation.memmap does not match"),
+    (lambda c: truncate(c / "replay/storage/next/reward.memmap"), "reward.memmap does not match"),
+    (lambda c: (c / "replay/sampler/sumtree.memmap").unlink(), "missing replay/sampler/sumtree.memmap"),
+    (lambda c: (c / "manifest.json").unlink(), "has no manifest.json"),
+])
+def test_damaged_checkpoints_are_refused_in_one_line_and_kept(tmp_path, capsys, damage, message):
+    assert run(config(), tmp_path) == 0
+    damage(tmp_path / "checkpoint")
+    before = sorted((p.name, p.stat().st_size) for p in (tmp_path / "checkpoint").rglob("*"))
+    capsys.readouterr()
+    assert run(config("train.steps=3000"), tmp_path) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+    assert sorted((p.name, p.stat().st_size) for p in (tmp_path / "checkpoint").rglob("*")) == before
+
+
+def test_a_checkpoint_from_another_seed_is_refused(tmp_path, capsys):
+    assert run(config("seed=2"), tmp_path / "two") == 0
+    assert run(config("seed=1", "train.steps=1000"), tmp_path / "one") == 0
+    shutil.rmtree(tmp_path / "one/checkpoint")
+    shutil.copytree(tmp_path / "two/checkpoint", tmp_path / "one/checkpoint")
+    capsys.readouterr()
+    assert run(config("seed=1", "train.steps=3000"), tmp_path / "one") == 2
+    err = capsys.readouterr().err
+    assert "belongs to another run (seed: 2 there, 1 here)" in err
+
+
+def test_checkpoints_hold_no_rebuildable_escnn_buffers(tmp_path):
+    assert run(config("agent.group=D8", "agent.width_strategy=sqrt", "train.steps=1000"), tmp_path) == 0
+    saved = torch.load(tmp_path / "checkpoint/agent.pt", weights_only=False)["agent"]["loss"]
+    assert saved and not any("_basisexpansion" in k for k in saved)
+    assert (tmp_path / "checkpoint/agent.pt").stat().st_size < 2e6
+
+
+def test_full_disk_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10**9, 10**9, 10**6))
+    assert run(config(), tmp_path) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not enough disk space" in err[0]
+    assert not (tmp_path / "eval.csv").exists() or len(rows(tmp_path / "eval.csv")) == 0
+
+
+def test_a_failed_checkpoint_write_is_one_line_and_keeps_the_last_one(tmp_path, capsys, monkeypatch):
+    assert run(config("train.steps=1000"), tmp_path) == 0
+    step = json.loads((tmp_path / "checkpoint/state.json").read_text())["env_step"]
+
+    def disk_full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(checkpoint.torch, "save", disk_full)
+    capsys.readouterr()
+    assert run(config("train.steps=3000"), tmp_path) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "No space left on device" in err[0] and "previous checkpoint is intact" in err[0]
+    assert json.loads((tmp_path / "checkpoint/state.json").read_text())["env_step"] == step
+    monkeypatch.undo()
+    assert run(config("train.steps=2000"), tmp_path) == 0
+
+
+def test_run_directory_that_cannot_be_made_is_one_line(tmp_path, capsys):
+    (tmp_path / "a_file").write_text("")
+    assert run(config(), tmp_path / "a_file" / "run") == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot create the run directory" in err[0]
+
+
+def test_sigterm_during_an_equivariant_update_stops_cleanly_and_resumes(tmp_path):
+    """The signal only sets a flag; the loop stops between updates, with one line."""
+    args = [*TINY, "agent.group=D8", "train.steps=3000", f"hydra.run.dir={tmp_path / 'run'}"]
+    proc = subprocess.Popen([*TRAIN, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    train_csv = tmp_path / "run/train.csv"
+    deadline = time.time() + 180
+    # the first update round starts right after the 1000 seed steps' row
+    while not (train_csv.exists() and len(train_csv.read_text().splitlines()) >= 2):
+        assert proc.poll() is None and time.time() < deadline, proc.communicate()
+        time.sleep(0.05)
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "run the same command to continue" in err
+    finished = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300)
+    assert finished.returncode == 0, finished.stderr
+
+
+def test_evaluation_video_is_written_and_playable(tmp_path):
+    assert run(config("train.steps=1000", "train.video=true", "train.video_every=2",
+                      "+env.width=64", "+env.height=48"), tmp_path) == 0
+    videos = sorted((tmp_path / "videos").glob("*.mp4"))
+    assert [v.name for v in videos] == ["eval_00000000.mp4"]  # evaluations 0 and 2, 4, ...
+    reader = imageio.get_reader(videos[0])
+    frames = [frame for frame in reader.iter_data()]
+    assert len(frames) == 251  # 250 agent steps (action repeat 4) and the final state
+    assert reader.get_meta_data()["fps"] == 12  # one frame per agent step: 4 x 0.02 s
+    assert frames[0].shape == (48, 64, 3)
+    assert frames[0].std() > 0  # not a blank image
+    # examples/inspect_run.py writes one from the checkpoint too
+    out = subprocess.run([sys.executable, str(ROOT / "examples/inspect_run.py"), str(tmp_path),
+                          "--episodes", "1", "--video", str(tmp_path / "replay.mp4")],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert sum(1 for _ in imageio.get_reader(tmp_path / "replay.mp4").iter_data()) == 251
+
+
+def test_sweep_directories_stay_short_and_the_launcher_uses_one_process_per_core():
+    long = ",".join(f"agent.networks.option{i}=value{i}" for i in range(40))
+    name = sweep_dirname(long)
+    assert len(name) <= 120 and name != sweep_dirname(long + "x")
+    assert sweep_dirname("seed=1,agent.group=D8") == "seed=1,agent.group=D8"
+    assert "/" not in sweep_dirname("env.id=GeoMDP/PointMass2D-v0")
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose("train", return_hydra_config=True)
+    assert cfg.hydra.launcher.n_jobs == usable_cores()
