@@ -25,7 +25,8 @@ from omegaconf import OmegaConf
 from scipy import stats
 
 IGNORED_KEYS = ("seed", "train.progress", "train.threads", "logger", "device",
-                "train.eval_every", "train.eval_episodes")
+                "train.eval_every", "train.eval_episodes", "train.eval_noisy_episodes",
+                "train.checkpoint_every", "train.video")
 
 
 @dataclass
@@ -34,6 +35,7 @@ class Run:
     options: dict[str, object]
     steps: np.ndarray
     returns: np.ndarray
+    noisy_returns: np.ndarray  # with the training noise (NaN where not logged)
 
 
 def _flatten(d: dict, prefix: str = "") -> dict[str, object]:
@@ -60,7 +62,8 @@ def find_runs(paths: list[Path]) -> list[Run]:
             options = _flatten(OmegaConf.to_container(OmegaConf.load(config), resolve=False))
             runs.append(Run(eval_csv.parent, options,
                             np.array([int(float(r["env_step"])) for r in rows]),
-                            np.array([float(r["episode_reward"]) for r in rows])))
+                            np.array([float(r["episode_reward"]) for r in rows]),
+                            np.array([float(r.get("noisy_episode_reward") or "nan") for r in rows])))
     return runs
 
 
@@ -103,8 +106,9 @@ def steps_to_threshold(run: Run, threshold: float) -> int | None:
 
 
 def table(groups: dict[str, list[Run]], threshold: float | None) -> str:
-    header = "| runs | seeds | env steps | final return (mean, 95% CI) | IQM |"
-    sep = "|---|---|---|---|---|"
+    header = ("| runs | seeds | env steps | final return (mean, 95% CI) | IQM "
+              "| final return with training noise (mean, 95% CI) |")
+    sep = "|---|---|---|---|---|---|"
     if threshold is not None:
         header += f" env steps to reach {threshold:g} (per seed) |"
         sep += "---|"
@@ -114,8 +118,11 @@ def table(groups: dict[str, list[Run]], threshold: float | None) -> str:
         mean, low, high = mean_ci(finals)
         iqm = stats.trim_mean(finals, 0.25)
         steps = sorted({int(r.steps[-1]) for r in runs})
+        noisy = np.array([r.noisy_returns[-1] for r in runs])
+        noisy_cell = ("–" if np.isnan(noisy).any() else
+                      "{:.1f} [{:.1f}, {:.1f}]".format(*mean_ci(noisy)))
         row = (f"| {label} | {len(runs)} | {'/'.join(map(str, steps))} | "
-               f"{mean:.1f} [{low:.1f}, {high:.1f}] | {iqm:.1f} |")
+               f"{mean:.1f} [{low:.1f}, {high:.1f}] | {iqm:.1f} | {noisy_cell} |")
         if threshold is not None:
             reached = [steps_to_threshold(r, threshold) for r in runs]
             row += " " + ", ".join("–" if s is None else str(s) for s in reached) + " |"
@@ -158,8 +165,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--reference", action="append", default=[],
                         help="VALUE:NAME, a horizontal line (e.g. 884:LQR oracle)")
     parser.add_argument("--markdown", type=Path, help="also write the table to this file")
+    parser.add_argument("--complete", type=int, default=None,
+                        help="only runs whose last evaluation is at this env step or later")
     args = parser.parse_args(argv)
-    runs = find_runs(args.paths)
+    runs = [r for r in find_runs(args.paths) if args.complete is None or r.steps[-1] >= args.complete]
     if not runs:
         raise SystemExit(f"geomdp-plot: error: no run directories (eval.csv + config.yaml) under "
                          f"{', '.join(map(str, args.paths))}")
