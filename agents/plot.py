@@ -24,6 +24,8 @@ import numpy as np
 from omegaconf import OmegaConf
 from scipy import stats
 
+from agents.nested import flatten
+
 IGNORED_KEYS = ("seed", "train.progress", "train.threads", "logger", "device",
                 "train.eval_every", "train.eval_episodes", "train.eval_noisy_episodes",
                 "train.checkpoint_every", "train.video")
@@ -38,16 +40,6 @@ class Run:
     noisy_returns: np.ndarray  # with the training noise (NaN where not logged)
 
 
-def _flatten(d: dict, prefix: str = "") -> dict[str, object]:
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flatten(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
-
-
 def find_runs(paths: list[Path]) -> list[Run]:
     runs = []
     for root in paths:
@@ -59,7 +51,7 @@ def find_runs(paths: list[Path]) -> list[Run]:
                 rows = list(csv.DictReader(f))
             if not rows:
                 continue
-            options = _flatten(OmegaConf.to_container(OmegaConf.load(config), resolve=False))
+            options = flatten(OmegaConf.to_container(OmegaConf.load(config), resolve=False))
             runs.append(Run(eval_csv.parent, options,
                             np.array([int(float(r["env_step"])) for r in rows]),
                             np.array([float(r["episode_reward"]) for r in rows]),

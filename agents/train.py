@@ -38,6 +38,7 @@ from tqdm import tqdm
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
 from agents import checkpoint
+from agents.nested import flatten
 from agents.replay import make_replay_buffer, sample_slices, update_priorities
 from agents.run_log import RunLog
 from agents.tdmpc import TDMPCAgent, TDMPCConfig
@@ -469,18 +470,8 @@ def _remove_if_only_hydra_files(run_dir: Path) -> None:
 
 def checkpoint_options(cfg: DictConfig) -> dict[str, Any]:
     """The options a checkpoint belongs to: all but those a continued run may change."""
-    flat = _flatten(OmegaConf.to_container(cfg, resolve=True))
+    flat = flatten(OmegaConf.to_container(cfg, resolve=True))
     return {k: v for k, v in flat.items() if not k.startswith(RESUMABLE_KEYS)}
-
-
-def _flatten(d: dict, prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flatten(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
 
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
