@@ -28,6 +28,7 @@ import numpy as np
 import torch
 from torchrl.data import TensorDictReplayBuffer
 
+from agents import faults
 from agents.tdmpc import TDMPCAgent
 
 FORMAT_VERSION = 2
@@ -67,6 +68,7 @@ def save(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
         tmp.mkdir()
         torch.save({"agent": agent.state_dict(), "torch_rng": torch.get_rng_state(),
                     "numpy_rng": np.random.get_state()}, tmp / "agent.pt")
+        faults.point("checkpoint_write")
         buffer.dumps(tmp / "replay")
         (tmp / "state.json").write_text(json.dumps({"format": FORMAT_VERSION, **loop_state}, indent=1))
         manifest = {"format": FORMAT_VERSION, "options": options or {},
@@ -76,7 +78,9 @@ def save(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
             if old.exists():  # left by a save interrupted after its swap
                 shutil.rmtree(old)
             final.rename(old)
+            faults.point("checkpoint_swap")
         tmp.rename(final)
+        faults.point("checkpoint_cleanup")
         shutil.rmtree(old, ignore_errors=True)
     except OSError as err:
         raise CheckpointError(f"cannot write the checkpoint in {run_dir} ({err.strerror or err}); "

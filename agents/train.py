@@ -37,7 +37,7 @@ from torchrl.envs.transforms import FrameSkipTransform
 from tqdm import tqdm
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
-from agents import checkpoint
+from agents import checkpoint, faults
 from agents.nested import flatten
 from agents.replay import make_replay_buffer, sample_slices, update_priorities
 from agents.run_log import RunLog
@@ -248,14 +248,16 @@ class Trainer:
                 out.append(v / v.norm() * radius)
         return torch.cat(out)
 
-    def policy(self, explore: bool, random: bool,
-               frames: list[np.ndarray] | None = None) -> TensorDictModule:
+    def policy(self, explore: bool, random: bool, frames: list[np.ndarray] | None = None,
+               phase: str = "acting") -> TensorDictModule:
         """The acting policy for one episode: random warm-up actions, or the planner;
         with ``frames``, the eval env is rendered before every action."""
         step = [self.state["agent_step"]]
+        phase = "seeding" if random else phase
 
         def act(observation: torch.Tensor) -> torch.Tensor:
             stop_if_requested()
+            faults.point(phase)
             if frames is not None:
                 frames.append(self._eval_gym_env().render())
             if random:
@@ -268,10 +270,10 @@ class Trainer:
         return TensorDictModule(act, in_keys=["observation"], out_keys=["action"])
 
     def episode(self, env: TransformedEnv, seed: int, explore: bool, random: bool,
-                frames: list[np.ndarray] | None = None) -> TensorDictBase:
+                frames: list[np.ndarray] | None = None, phase: str = "acting") -> TensorDictBase:
         self.agent.planner.reset()
         env.set_seed(seed)
-        td = env.rollout(max_steps=10**9, policy=self.policy(explore, random, frames),
+        td = env.rollout(max_steps=10**9, policy=self.policy(explore, random, frames, phase),
                          break_when_any_done=True, auto_reset=True)
         if frames is not None:
             frames.append(self._eval_gym_env().render())  # the final state
@@ -292,8 +294,8 @@ class Trainer:
         def returns(n: int, explore: bool) -> list[float]:
             return [float(self.episode(self.eval_env, 10**6 + 1000 * self.cfg.seed + i,
                                        explore=explore, random=False,
-                                       frames=frames if i == 0 and not explore else None
-                                       )["next", "reward"].sum())
+                                       frames=frames if i == 0 and not explore else None,
+                                       phase="evaluation")["next", "reward"].sum())
                     for i in range(n)]
 
         plain = returns(self.cfg.train.eval_episodes, explore=False)
@@ -318,6 +320,7 @@ class Trainer:
         totals: dict[str, float] = {}
         for _ in range(n):
             stop_if_requested()
+            faults.point("update")
             batch = sample_slices(self.buffer, horizon)
             metrics = self.agent.update(batch.select(*REPLAY_KEYS, "index", "priority_weight",
                                                      strict=False))
