@@ -202,3 +202,9 @@ def test_plain_agent_on_any_gymnasium_env(tmp_path):
 @pytest.mark.skipif(not os.environ.get("GEOMDP_TEST_CUDA"), reason="set GEOMDP_TEST_CUDA=1 on a GPU")
 def test_cuda(tmp_path):
     assert run(config("device=cuda", "agent.group=D4"), tmp_path) == 0
+
+
+def test_progress_bar_shows_returns_for_people(tmp_path, capsys):
+    assert run(config("train.progress=true", "train.steps=1000"), tmp_path) == 0
+    err = capsys.readouterr().err
+    assert "eval_return=0.0" in err and "e-" not in err.split("eval_return=")[-1][:12]
