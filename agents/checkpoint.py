@@ -1,10 +1,11 @@
 """Checkpoints that survive interruption and refuse what they cannot trust.
 
 A checkpoint is a directory ``checkpoint/`` in the run directory holding the
-agent (parameters, target network, optimisers, RNG), the replay buffer
-(TorchRL's ``dumps``), the loop state and ``manifest.json``: the SHA-256 of
-every file and the run's options (seed included). It is written whole to
-``checkpoint.tmp/`` (the manifest last) and swapped in by renames, so a kill
+agent (parameters, target network, optimisers, RNG), the replay buffer (what
+it holds, not its capacity: ``agents.replay.save_replay``), the loop state and
+``manifest.json``: the SHA-256 of every file and the run's options (seed
+included). It is written whole to ``checkpoint.tmp/`` (the manifest last)
+and swapped in by renames, so a kill
 at any moment leaves a complete checkpoint under ``checkpoint/`` or
 ``checkpoint.old/``; whatever an interrupted swap left behind is cleaned up
 by the next load or save. On load every file is checked against the
@@ -29,9 +30,10 @@ import torch
 from torchrl.data import TensorDictReplayBuffer
 
 from agents import faults
+from agents.replay import load_replay, save_replay
 from agents.tdmpc import TDMPCAgent
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 MANIFEST = "manifest.json"
 
 
@@ -69,7 +71,7 @@ def save(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
         torch.save({"agent": agent.state_dict(), "torch_rng": torch.get_rng_state(),
                     "numpy_rng": np.random.get_state()}, tmp / "agent.pt")
         faults.point("checkpoint_write")
-        buffer.dumps(tmp / "replay")
+        save_replay(buffer, tmp / "replay.pt")
         (tmp / "state.json").write_text(json.dumps({"format": FORMAT_VERSION, **loop_state}, indent=1))
         manifest = {"format": FORMAT_VERSION, "options": options or {},
                     "files": {name: _sha256(tmp / name) for name in _files(tmp)}}
@@ -148,7 +150,7 @@ def load(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
     try:
         saved = torch.load(path / "agent.pt", map_location=agent.device, weights_only=False)
         agent.load_state_dict(saved["agent"])
-        buffer.loads(path / "replay")
+        load_replay(buffer, path / "replay.pt")
     except Exception as err:  # noqa: BLE001  (any failure to read means the same thing)
         raise CheckpointError(f"checkpoint {path} is from another agent or unreadable "
                               f"({type(err).__name__}: {str(err).splitlines()[0][:200]}); "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 from tensordict import TensorDictBase
@@ -54,3 +55,40 @@ def update_priorities(buffer: TensorDictReplayBuffer, batch: TensorDictBase,
         horizon = batch.shape[1]
         buffer.update_priority(batch["index"].reshape(-1),
                                priority.clamp(max=1e4).repeat_interleave(horizon))
+
+
+def save_replay(buffer: TensorDictReplayBuffer, path: Path) -> None:
+    """Write what the buffer holds, and no more: the stored transitions, the writer's
+    cursor and, for prioritised replay, the priorities of the stored slots.
+
+    TorchRL's ``dumps`` writes the whole capacity (and reads the priority trees one
+    slot at a time in Python): 7.7 MB for a nearly empty CPU-preset buffer, 80 MB
+    for the paper preset, at every checkpoint.
+    """
+    n = len(buffer.storage)
+    state: dict = {"len": n, "writer": buffer._writer.state_dict(),
+                   "data": buffer.storage[:n].clone() if n else None}
+    sampler = buffer.sampler
+    if isinstance(sampler, PrioritizedSliceSampler) and n:
+        index = torch.arange(n)
+        state["priorities"] = {"sum": sampler._sum_tree[index], "min": sampler._min_tree[index],
+                               "max": sampler._max_priority}
+    torch.save(state, path)
+
+
+def load_replay(buffer: TensorDictReplayBuffer, path: Path) -> None:
+    """Restore what ``save_replay`` wrote into a new, empty buffer of the same configuration."""
+    state = torch.load(path, weights_only=False)
+    n = state["len"]
+    if n > buffer.storage.max_size:
+        raise ValueError(f"the saved replay holds {n} steps, more than this buffer's capacity "
+                         f"({buffer.storage.max_size})")
+    if n:
+        index = torch.arange(n)
+        buffer.storage.set(index, state["data"])
+        if "priorities" in state:
+            sampler = buffer.sampler
+            sampler._sum_tree[index] = state["priorities"]["sum"]
+            sampler._min_tree[index] = state["priorities"]["min"]
+            sampler._max_priority = state["priorities"]["max"]
+    buffer._writer.load_state_dict(state["writer"])

@@ -60,9 +60,9 @@ def truncate(path):
 
 @pytest.mark.parametrize("damage, message", [
     (lambda c: flip_byte(c / "agent.pt"), "agent.pt does not match its checksum"),
-    (lambda c: flip_byte(c / "replay/storage/observation.memmap"), "observation.memmap does not match"),
-    (lambda c: truncate(c / "replay/storage/next/reward.memmap"), "reward.memmap does not match"),
-    (lambda c: (c / "replay/sampler/sumtree.memmap").unlink(), "missing replay/sampler/sumtree.memmap"),
+    (lambda c: flip_byte(c / "replay.pt"), "replay.pt does not match its checksum"),
+    (lambda c: truncate(c / "replay.pt"), "replay.pt does not match its checksum"),
+    (lambda c: (c / "replay.pt").unlink(), "missing replay.pt"),
     (lambda c: (c / "manifest.json").unlink(), "has no manifest.json"),
 ])
 def test_damaged_checkpoints_are_refused_in_one_line_and_kept(tmp_path, capsys, damage, message):
@@ -87,11 +87,17 @@ def test_a_checkpoint_from_another_seed_is_refused(tmp_path, capsys):
     assert "belongs to another run (seed: 2 there, 1 here)" in err
 
 
-def test_checkpoints_hold_no_rebuildable_escnn_buffers(tmp_path):
-    assert run(config("agent.group=D8", "agent.width_strategy=sqrt", "train.steps=1000"), tmp_path) == 0
+def test_checkpoints_hold_what_cannot_be_rebuilt_only(tmp_path):
+    """No escnn basis buffers (rebuilt with the networks); the replay's stored steps, not
+    its capacity (agent.replay.capacity=5000 here, 125 steps stored)."""
+    assert run(config("agent.group=D8", "agent.width_strategy=sqrt", "agent.networks.layers=dense",
+                      "train.steps=1000"), tmp_path) == 0
     saved = torch.load(tmp_path / "checkpoint/agent.pt", weights_only=False)["agent"]["loss"]
     assert saved and not any("_basisexpansion" in k for k in saved)
     assert (tmp_path / "checkpoint/agent.pt").stat().st_size < 2e6
+    replay = torch.load(tmp_path / "checkpoint/replay.pt", weights_only=False)
+    assert replay["len"] == 125 and replay["data"].shape == (125,)
+    assert (tmp_path / "checkpoint/replay.pt").stat().st_size < 60_000
 
 
 def test_full_disk_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
