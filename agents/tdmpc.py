@@ -19,7 +19,15 @@ from agents.replay import ReplayConfig
 from agents.world_model import WorldModel
 from geomdp_envs.symmetry import Symmetry
 
-REBUILT = "_basisexpansion"  # escnn's basis buffers, in every equivariant layer
+# escnn's buffers in every equivariant layer (``EquivariantLinear.layer``): the basis,
+# the bias's change of basis, and its eval-mode expansion caches, which this code
+# never uses. All are rebuilt with the networks, and they are most of an agent's bytes.
+ESCNN_BUFFERS = ("matrix", "expanded_bias", "bias_expansion")
+
+
+def rebuilt_with_networks(key: str) -> bool:
+    """Whether a state-dict entry is one of escnn's rebuildable buffers (not saved)."""
+    return "_basisexpansion" in key or (".layer." in key and key.rsplit(".", 1)[-1] in ESCNN_BUFFERS)
 
 
 @dataclass
@@ -177,9 +185,7 @@ class TDMPCAgent:
         return float(gap / torch.stack(torch._foreach_norm(online)).norm())
 
     def state_dict(self) -> dict[str, Any]:
-        # escnn's basis buffers are rebuilt with the networks: most of an equivariant
-        # agent's bytes, and nothing a run changes.
-        networks = {k: v for k, v in self.loss.state_dict().items() if REBUILT not in k}
+        networks = {k: v for k, v in self.loss.state_dict().items() if not rebuilt_with_networks(k)}
         return {"loss": networks,
                 "model_optimizer": self.model_optimizer.state_dict(),
                 "policy_optimizer": self.policy_optimizer.state_dict(),
@@ -187,7 +193,7 @@ class TDMPCAgent:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         missing, unexpected = self.loss.load_state_dict(state["loss"], strict=False)
-        missing = [k for k in missing if REBUILT not in k]
+        missing = [k for k in missing if not rebuilt_with_networks(k)]
         if missing or unexpected:
             raise ValueError(f"the saved networks do not fit this agent (missing "
                              f"{missing[:3]}, unexpected {unexpected[:3]})")
