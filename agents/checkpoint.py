@@ -41,6 +41,10 @@ class CheckpointError(RuntimeError):
     """A checkpoint that cannot be used; the run refuses to start (and to overwrite it)."""
 
 
+class CheckpointWriteError(CheckpointError):
+    """A checkpoint that could not be written (disk full, permissions); the last one stays."""
+
+
 def checkpoint_dir(run_dir: Path) -> Path:
     return run_dir / "checkpoint"
 
@@ -68,8 +72,9 @@ def save(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
     try:
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir()
+        cuda_rng = torch.cuda.get_rng_state_all() if agent.device.type == "cuda" else None
         torch.save({"agent": agent.state_dict(), "torch_rng": torch.get_rng_state(),
-                    "numpy_rng": np.random.get_state()}, tmp / "agent.pt")
+                    "cuda_rng": cuda_rng, "numpy_rng": np.random.get_state()}, tmp / "agent.pt")
         faults.point("checkpoint_write")
         save_replay(buffer, tmp / "replay.pt")
         (tmp / "state.json").write_text(json.dumps({"format": FORMAT_VERSION, **loop_state}, indent=1))
@@ -84,8 +89,9 @@ def save(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
         tmp.rename(final)
         faults.point("checkpoint_cleanup")
         shutil.rmtree(old, ignore_errors=True)
-    except OSError as err:
-        raise CheckpointError(f"cannot write the checkpoint in {run_dir} ({err.strerror or err}); "
+    except (OSError, RuntimeError) as err:  # torch.save reports a full disk as RuntimeError
+        reason = getattr(err, "strerror", None) or str(err).splitlines()[0][:200]
+        raise CheckpointWriteError(f"cannot write the checkpoint in {run_dir} ({reason}); "
                               "the previous checkpoint is intact: free space or fix permissions, "
                               "then run the same command to continue") from None
 
@@ -148,7 +154,9 @@ def load(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
         return None
     state = verify(path, options)
     try:
-        saved = torch.load(path / "agent.pt", map_location=agent.device, weights_only=False)
+        # On the CPU: the RNG states must stay CPU byte tensors; load_state_dict copies
+        # the networks onto the agent's device.
+        saved = torch.load(path / "agent.pt", map_location="cpu", weights_only=False)
         agent.load_state_dict(saved["agent"])
         load_replay(buffer, path / "replay.pt")
     except Exception as err:  # noqa: BLE001  (any failure to read means the same thing)
@@ -156,5 +164,7 @@ def load(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
                               f"({type(err).__name__}: {str(err).splitlines()[0][:200]}); "
                               "delete it to start over, or choose another hydra.run.dir") from None
     torch.set_rng_state(saved["torch_rng"])
+    if saved.get("cuda_rng") and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(saved["cuda_rng"])
     np.random.set_state(saved["numpy_rng"])
     return state

@@ -67,18 +67,18 @@ class NetworkConfig:
             raise ValueError(f"layers={self.layers!r}; valid: auto, {', '.join(LINEAR_KINDS)}")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation={self.activation!r}; valid: {', '.join(ACTIVATIONS)}")
-
-    def linear_kind(self) -> str:
-        """The hidden layers' kind once ``auto`` is decided."""
-        if self.layers != "auto":
-            return self.layers
-        return "fourier" if self.width_strategy == "sqrt" else "dense"
         for name in ("latent_dim", "hidden_dim", "hidden_layers", "num_q"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         unknown = set(self.equivariant) - set(COMPONENTS)
         if unknown:
             raise ValueError(f"unknown components {sorted(unknown)}; valid: {', '.join(COMPONENTS)}")
+
+    def linear_kind(self) -> str:
+        """The hidden layers' kind once ``auto`` is decided."""
+        if self.layers != "auto":
+            return self.layers
+        return "fourier" if self.width_strategy == "sqrt" else "dense"
 
 
 def regular_copies(width: int, group: AgentGroup, strategy: str) -> int:

@@ -16,6 +16,10 @@ from pathlib import Path
 from torchrl.record.loggers import CSVLogger, Logger, TensorboardLogger
 
 
+class RunLogError(ValueError):
+    """A run directory's logs that this version cannot continue."""
+
+
 class CsvTable:
     """Append-only CSV with a fixed header, flushed after every row."""
 
@@ -28,7 +32,7 @@ class CsvTable:
             with path.open(newline="") as f:
                 header = next(csv.reader(f), [])
             if header != columns:
-                raise ValueError(f"{path} has other columns than this version writes "
+                raise RunLogError(f"{path} has other columns than this version writes "
                                  "(made by an older version?): use another hydra.run.dir")
 
     def append(self, row: dict[str, float]) -> None:

@@ -63,9 +63,11 @@ class TDMPCConfig:
     grad_clip_norm: float = 10.0
 
     def __post_init__(self) -> None:
-        for name in ("horizon", "batch_size", "target_update_every", "horizon_schedule"):
+        for name in ("horizon", "batch_size", "target_update_every"):
             if getattr(self, name) < 1:
                 raise ValueError(f"agent.{name} must be >= 1, got {getattr(self, name)}")
+        if self.horizon_schedule < 0:  # 0: the full horizon from the start
+            raise ValueError(f"agent.horizon_schedule must be >= 0, got {self.horizon_schedule}")
         if not 0 < self.tau <= 1:
             raise ValueError(f"agent.tau must be in (0, 1], got {self.tau}")
         for name in ("lr", "grad_clip_norm"):
@@ -176,6 +178,22 @@ class TDMPCAgent:
         return metrics
 
     @torch.no_grad()
+    def basis_fingerprints(self) -> dict[str, torch.Tensor]:
+        """Each equivariant layer's map applied to a fixed probe, from the current
+        coefficients: checkpoints store coefficients only, and escnn computes some
+        bases numerically (octahedral, icosahedral), so a resume checks that the
+        rebuilt bases turn the same coefficients into the same maps."""
+        out = {}
+        for name, module in self.model.named_modules():
+            if hasattr(module, "expand") and hasattr(module, "in_type"):
+                weight, bias = module.expand()
+                probe = torch.randn(weight.shape[1], generator=torch.Generator().manual_seed(0),
+                                    dtype=torch.float64)
+                mapped = weight.double().cpu() @ probe
+                out[name] = mapped + (0 if bias is None else bias.double().cpu())
+        return out
+
+    @torch.no_grad()
     def target_lag(self) -> float:
         """|online - target| / |online| over all model parameters: small and non-zero
         when the target tracks the online network, growing if it stopped moving."""
@@ -186,7 +204,7 @@ class TDMPCAgent:
 
     def state_dict(self) -> dict[str, Any]:
         networks = {k: v for k, v in self.loss.state_dict().items() if not rebuilt_with_networks(k)}
-        return {"loss": networks,
+        return {"loss": networks, "basis_fingerprints": self.basis_fingerprints(),
                 "model_optimizer": self.model_optimizer.state_dict(),
                 "policy_optimizer": self.policy_optimizer.state_dict(),
                 "generator": self.generator.get_state(), "updates": self.updates}
@@ -197,6 +215,12 @@ class TDMPCAgent:
         if missing or unexpected:
             raise ValueError(f"the saved networks do not fit this agent (missing "
                              f"{missing[:3]}, unexpected {unexpected[:3]})")
+        rebuilt = self.basis_fingerprints()
+        for name, saved in state.get("basis_fingerprints", {}).items():
+            now = rebuilt.get(name)
+            if now is None or not torch.allclose(now, saved.to(now), rtol=1e-4, atol=1e-5):
+                raise ValueError(f"escnn rebuilt a different basis for {name} than the one the "
+                                 "checkpoint was trained with (another escnn version or cache?)")
         self.model_optimizer.load_state_dict(state["model_optimizer"])
         self.policy_optimizer.load_state_dict(state["policy_optimizer"])
         self.generator.set_state(state["generator"])

@@ -40,7 +40,7 @@ import geomdp_envs  # noqa: F401  (registers the tasks)
 from agents import checkpoint, faults
 from agents.nested import flatten
 from agents.replay import make_replay_buffer, sample_slices, update_priorities
-from agents.run_log import RunLog
+from agents.run_log import RunLog, RunLogError
 from agents.tdmpc import TDMPCAgent, TDMPCConfig
 from agents.video import frames_per_second, write_video
 from geomdp_envs.mujoco_env import load_triton_before_mesa
@@ -390,9 +390,9 @@ def run(cfg: DictConfig, run_dir: Path) -> int:
                               "choose another hydra.run.dir") from None
         trainer = Trainer(cfg, run_dir, validated)
         trainer.train()
-    except (ConfigError, checkpoint.CheckpointError, ValueError) as err:
+    except (ConfigError, checkpoint.CheckpointError, RunLogError) as err:
         print(f"geomdp-train: error: {err}", file=sys.stderr)
-        return 1 if isinstance(err, RunDirError) or "cannot write" in str(err) else 2
+        return 1 if isinstance(err, (RunDirError, checkpoint.CheckpointWriteError)) else 2
     except KeyboardInterrupt:
         print(f"\ninterrupted; the last checkpoint is at env step {_saved_step(run_dir)}: run the "
               "same command to continue", file=sys.stderr)
@@ -405,10 +405,15 @@ def run(cfg: DictConfig, run_dir: Path) -> int:
 
 
 def _saved_step(run_dir: Path) -> int:
+    """The env step of the checkpoint a rerun will resume from (a save interrupted
+    mid-swap leaves it under checkpoint.old)."""
     import json
 
-    path = checkpoint.checkpoint_dir(run_dir) / "state.json"
-    return json.loads(path.read_text())["env_step"] if path.exists() else 0
+    for name in ("checkpoint", "checkpoint.old"):
+        path = run_dir / name / "state.json"
+        if path.exists():
+            return json.loads(path.read_text())["env_step"]
+    return 0
 
 
 # --- interruption, and the run directory ------------------------------------------

@@ -109,12 +109,17 @@ def test_full_disk_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
     assert not (tmp_path / "eval.csv").exists() or len(rows(tmp_path / "eval.csv")) == 0
 
 
-def test_a_failed_checkpoint_write_is_one_line_and_keeps_the_last_one(tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("error", [
+    OSError(28, "No space left on device"),
+    RuntimeError("[enforce fail at inline_container.cc] No space left on device")])
+def test_a_failed_checkpoint_write_is_one_line_and_keeps_the_last_one(tmp_path, capsys, monkeypatch,
+                                                                     error):
+    """torch.save reports a full disk as OSError or RuntimeError: both are one line."""
     assert run(config("train.steps=1000"), tmp_path) == 0
     step = json.loads((tmp_path / "checkpoint/state.json").read_text())["env_step"]
 
     def disk_full(*args, **kwargs):
-        raise OSError(28, "No space left on device")
+        raise error
 
     monkeypatch.setattr(checkpoint.torch, "save", disk_full)
     capsys.readouterr()
@@ -161,3 +166,24 @@ def test_sweep_directories_stay_short_and_the_launcher_uses_one_process_per_core
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
         cfg = compose("train", return_hydra_config=True)
     assert cfg.hydra.launcher.n_jobs == usable_cores()
+
+
+def test_a_checkpoint_whose_rebuilt_bases_differ_is_refused(tmp_path, capsys):
+    """Checkpoints store basis coefficients, not escnn's bases: if escnn rebuilds a
+    different basis (another version, another cache), resuming must refuse, not run
+    a different network."""
+    assert run(config("env=pointmass3d", "agent.group=octahedral", "train.steps=1000"), tmp_path) == 0
+    agent_file = tmp_path / "checkpoint/agent.pt"
+    saved = torch.load(agent_file, weights_only=False)
+    fingerprints = saved["agent"]["basis_fingerprints"]
+    assert fingerprints, "equivariant layers leave fingerprints"
+    name = next(iter(fingerprints))
+    fingerprints[name] = -fingerprints[name]  # as a sign-flipped basis would give
+    torch.save(saved, agent_file)
+    manifest = json.loads((tmp_path / "checkpoint/manifest.json").read_text())
+    manifest["files"]["agent.pt"] = checkpoint._sha256(agent_file)
+    (tmp_path / "checkpoint/manifest.json").write_text(json.dumps(manifest))
+    capsys.readouterr()
+    assert run(config("env=pointmass3d", "agent.group=octahedral", "train.steps=2000"), tmp_path) == 2
+    err = capsys.readouterr().err
+    assert "escnn rebuilt a different basis" in err

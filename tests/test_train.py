@@ -155,6 +155,8 @@ def test_changed_options_are_refused_on_resume(tmp_path, capsys):
     (["agent.replay.capacity=2"], "agent.replay.capacity (2) must hold at least one batch"),
     (["logger.tensorboard=maybe"], "logger.tensorboard='maybe'; valid: true, false, auto"),
     (["train.video=yes"], "train.video must be true or false, got 'yes'"),
+    (["agent.networks.latent_dim=0"], "latent_dim must be >= 1, got 0"),
+    (["+agent.equivariant.transtion=false"], "unknown components ['transtion']"),
 ])
 def test_bad_input_fails_fast_with_one_clear_line(overrides, message, tmp_path, capsys):
     start = time.time()
