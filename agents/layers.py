@@ -115,12 +115,9 @@ class EquivariantLinear(nn.Module):
         return self.layer.expand_parameters()
 
     def open_scope(self) -> None:
-        """Expand now and reuse the result until ``close_scope`` (see ``expansion_scope``)."""
+        """Expand now and reuse the result until ``expansion_scope`` restores the outer one."""
         weight, bias = self.expand()
         self._scoped = (self._current_parameters(), weight, bias)
-
-    def close_scope(self) -> None:
-        self._scoped = None
 
     def expanded(self) -> tuple[torch.Tensor, torch.Tensor | None]:
         """The weight and bias this call uses: the scope's, or a fresh expansion."""

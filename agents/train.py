@@ -363,7 +363,7 @@ class Trainer:
                 eval_start = time.perf_counter()
                 self.evaluate()
                 state["wall_time"] += time.perf_counter() - eval_start
-            if (state["env_step"] - state.get("last_checkpoint_step", 0) >= cfg.checkpoint_every
+            if (state["env_step"] - state["last_checkpoint_step"] >= cfg.checkpoint_every
                     or state["env_step"] >= cfg.steps):
                 state["last_checkpoint_step"] = state["env_step"]
                 checkpoint.save(self.run_dir, self.agent, self.buffer, state, self.options)
