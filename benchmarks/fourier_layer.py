@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import argparse
 import platform
-import time
 
 import torch
 import torch.nn.functional as F
+from timing import best_time
 
 from agents.fourier import FourierLinear
 from agents.groups import make_group
@@ -28,19 +28,8 @@ BATCHES = (268, 1280)
 
 
 def timed(fn, min_time: float) -> float:
-    """Seconds per call: the best of 5 runs of as many calls as fill ``min_time`` / 5."""
-    fn()
-    calls, start = 1, time.perf_counter()
-    while time.perf_counter() - start < min_time / 5:
-        fn()
-        calls += 1
-    best = float("inf")
-    for _ in range(5):
-        start = time.perf_counter()
-        for _ in range(calls):
-            fn()
-        best = min(best, (time.perf_counter() - start) / calls)
-    return best
+    """Seconds per call: the best of 5 runs (``timing.best_time``)."""
+    return best_time(fn, min_time, rounds=5)
 
 
 def flops_per_sample(layer: FourierLinear) -> tuple[int, int]:

@@ -21,10 +21,10 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import time
 
 import gymnasium
 import torch
+from timing import best_time
 
 import geomdp_envs  # noqa: F401
 from agents import NetworkConfig, build_networks
@@ -35,19 +35,8 @@ GROUPS = [("D4", 2), ("D8", 2), ("octahedral", 3), ("icosahedral", 3)]
 
 
 def timed(fn, min_time: float = 0.5) -> float:  # noqa: ANN001
-    """Seconds per call: the best of 3 runs of as many calls as fill ``min_time``."""
-    fn()
-    calls, start = 1, time.perf_counter()
-    while time.perf_counter() - start < min_time / 3:
-        fn()
-        calls += 1
-    best = float("inf")
-    for _ in range(3):
-        start = time.perf_counter()
-        for _ in range(calls):
-            fn()
-        best = min(best, (time.perf_counter() - start) / calls)
-    return best
+    """Seconds per call: the best of 3 runs (``timing.best_time``)."""
+    return best_time(fn, min_time, rounds=3)
 
 
 def measure(net: torch.nn.Module) -> dict[str, float]:
