@@ -30,6 +30,7 @@ import torch
 from torchrl.data import TensorDictReplayBuffer
 
 from agents import faults
+from agents.nested import differences
 from agents.replay import load_replay, save_replay
 from agents.tdmpc import TDMPCAgent
 
@@ -134,16 +135,11 @@ def verify(path: Path, options: dict[str, Any] | None = None) -> dict[str, Any]:
             raise CheckpointError(f"checkpoint {path} is corrupted: {name} does not match its "
                                   "checksum; delete it to start over")
     if options is not None and manifest.get("options") != options:
-        diffs = _differences(manifest.get("options") or {}, options)
+        diffs = [f"{k}: {a!r} there, {b!r} here"
+                 for k, a, b in differences(manifest.get("options") or {}, options)]
         raise CheckpointError(f"checkpoint {path} belongs to another run ({'; '.join(diffs[:3])}); "
                               "use that run's options, or delete the checkpoint to start over")
     return json.loads((path / "state.json").read_text())
-
-
-def _differences(saved: dict[str, Any], current: dict[str, Any]) -> list[str]:
-    keys = sorted(set(saved) | set(current))
-    return [f"{k}: {saved.get(k)!r} there, {current.get(k)!r} here"
-            for k in keys if saved.get(k) != current.get(k)]
 
 
 def load(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,

@@ -38,7 +38,7 @@ from tqdm import tqdm
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
 from agents import checkpoint, faults
-from agents.nested import flatten
+from agents.nested import differences, flatten
 from agents.replay import make_replay_buffer, sample_slices, update_priorities
 from agents.run_log import RunLog, RunLogError
 from agents.tdmpc import TDMPCAgent, TDMPCConfig
@@ -180,19 +180,12 @@ def check_resumable(run_dir: Path, cfg: DictConfig) -> None:
     current = OmegaConf.to_container(cfg, resolve=True)
     if saved_path.exists():
         saved = OmegaConf.to_container(OmegaConf.load(saved_path), resolve=True)
-        diffs = [f"{k}: {a!r} -> {b!r}" for k, a, b in _diff(saved, current)
+        diffs = [f"{k}: {a!r} -> {b!r}" for k, a, b in differences(saved, current)
                  if not k.startswith(RESUMABLE_KEYS)]
         if diffs:
             raise ConfigError(f"{run_dir} holds a run with other options ({'; '.join(diffs)}); "
                               "use another hydra.run.dir, or the run's own options")
     OmegaConf.save(OmegaConf.create(current), saved_path)
-
-
-def _diff(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
-    if isinstance(a, dict) and isinstance(b, dict):
-        return [d for k in sorted(set(a) | set(b))
-                for d in _diff(a.get(k), b.get(k), f"{prefix}{k}.")]
-    return [] if a == b else [(prefix.rstrip("."), a, b)]
 
 
 # --- the loop ------------------------------------------------------------------
