@@ -25,6 +25,8 @@ import torch.nn.functional as F
 from escnn import nn as enn
 from torch import nn
 
+from agents.spectral import GridActivation, Quadrature, SpectralLayerNorm
+
 Layout = int | enn.FieldType
 
 ACTIVATIONS = {"mish": nn.Mish, "elu": nn.ELU, "relu": nn.ReLU, "silu": nn.SiLU}
@@ -184,8 +186,11 @@ LINEAR_KINDS = ("dense", "fourier")
 
 
 def is_regular(layout: Layout) -> bool:
-    """Whether a layout is made only of regular fields (a hidden layer of an equivariant net)."""
-    return not isinstance(layout, int) and all(
+    """Whether a layout is made only of regular fields of a finite group (a hidden
+    layer of an equivariant net; continuous groups' hidden fields are band-limited)."""
+    if isinstance(layout, int) or layout.gspace.fibergroup.continuous:
+        return False
+    return all(
         rep.name == layout.gspace.fibergroup.regular_representation.name
         for rep in layout.representations)
 
@@ -241,3 +246,16 @@ def activation(name: str) -> nn.Module:
     if name not in ACTIVATIONS:
         raise ValueError(f"unknown activation {name!r}; valid: {', '.join(ACTIVATIONS)}")
     return ACTIVATIONS[name]()
+
+
+def norm_and_activation(layout: Layout, activation_name: str,
+                        grid: Quadrature | None = None) -> list[nn.Module]:
+    """LayerNorm then the nonlinearity, for a hidden layout: pointwise on plain and
+    regular fields; on band-limited fields of a continuous group, LayerNorm of their
+    functions (exact) and the nonlinearity sampled on ``grid`` (``agents/spectral.py``)."""
+    if is_pointwise(layout):
+        return [FieldLayerNorm(layout), activation(activation_name)]
+    if grid is None:
+        raise ValueError("band-limited fields need a quadrature grid for their nonlinearity")
+    return [SpectralLayerNorm(layout, grid), GridActivation(layout, activation(activation_name),
+                                                            grid)]

@@ -28,13 +28,13 @@ from agents.groups import AgentGroup, field_type, group_for_task
 from agents.layers import (
     ACTIVATIONS,
     LINEAR_KINDS,
-    FieldLayerNorm,
     Layout,
-    activation,
     concat,
     layout_size,
     make_linear,
+    norm_and_activation,
 )
+from agents.spectral import Quadrature
 from geomdp_envs.symmetry import Field, Symmetry
 
 WIDTH_STRATEGIES = ("sqrt", "linear")
@@ -58,6 +58,13 @@ class NetworkConfig:
     # (block-diagonal in the irrep basis), or auto: fourier for sqrt width, where it
     # is faster, dense for linear width (few fields), where it is not (BENCHMARKS.md).
     layers: str = "auto"
+    # Continuous groups (SO2, O2, SO3, O3): hidden fields keep frequencies <= max_frequency,
+    # nonlinearities sample a grid exact to grid_frequency (null: agents.groups' defaults).
+    max_frequency: int | None = None
+    grid_frequency: int | None = None
+    # A continuous group that is only an approximate symmetry of the task (O2 on
+    # PointMass2D, whose walls keep only D4) is refused unless this is set.
+    allow_approximate: bool = False
 
     def __post_init__(self) -> None:
         if self.width_strategy not in WIDTH_STRATEGIES:
@@ -82,8 +89,9 @@ class NetworkConfig:
 
 
 def regular_copies(width: int, group: AgentGroup, strategy: str) -> int:
-    """How many regular fields stand in for ``width`` plain channels."""
-    divisor = math.sqrt(group.order) if strategy == "sqrt" else group.order
+    """How many hidden fields (regular, or band-limited for a continuous group) stand
+    in for ``width`` plain channels: the field size plays the role of |G|."""
+    divisor = math.sqrt(group.field_size) if strategy == "sqrt" else group.field_size
     return max(1, round(width / divisor))
 
 
@@ -95,12 +103,13 @@ class FieldMLP(nn.Module):
     """
 
     def __init__(self, in_layout: Layout, hidden: list[Layout], out_layout: Layout,
-                 activation_name: str = "elu", linear_kind: str = "dense") -> None:
+                 activation_name: str = "elu", linear_kind: str = "dense",
+                 grid: Quadrature | None = None) -> None:
         super().__init__()
         layers, previous = [], in_layout
         for layout in hidden:
-            layers += [make_linear(previous, layout, kind=linear_kind), FieldLayerNorm(layout),
-                       activation(activation_name)]
+            layers += [make_linear(previous, layout, kind=linear_kind),
+                       *norm_and_activation(layout, activation_name, grid)]
             previous = layout
         layers.append(make_linear(previous, out_layout))
         self.net = nn.Sequential(*layers)
@@ -148,8 +157,9 @@ class Space:
         return n if self.group is None else self.group.gspace.type(*[self.group.trivial] * n)
 
     def mlp(self, in_layout: Layout, out_layout: Layout) -> FieldMLP:
+        grid = None if self.group is None else self.group.quadrature
         return FieldMLP(in_layout, [self.hidden] * self.config.hidden_layers, out_layout,
-                        self.config.activation, self.config.linear_kind())
+                        self.config.activation, self.config.linear_kind(), grid)
 
 
 def squash(x: torch.Tensor, fields: tuple[Field, ...]) -> torch.Tensor:
@@ -230,7 +240,12 @@ def build_networks(config: NetworkConfig, symmetry: Symmetry | None,
         raise ValueError(f"group {config.group} needs a task that declares its symmetry "
                          "(a GeoMDP task); use group=none for other environments")
     else:
-        group, exact = group_for_task(config.group, symmetry)
+        group, exact = group_for_task(config.group, symmetry, config.max_frequency,
+                                      config.grid_frequency)
+        if group.continuous and not exact and not config.allow_approximate:
+            raise ValueError(f"{config.group} is only an approximate symmetry of this task "
+                             f"(exact group: {symmetry.exact_group}); set "
+                             "agent.allow_approximate=true to train with it anyway")
         observation, action = symmetry.observation, symmetry.action
     use = {name: group is not None and config.equivariant.get(name, True) for name in COMPONENTS}
     if (use["q"] or use["policy"]) and not use["transition"]:

@@ -106,6 +106,11 @@ class TDMPCConfig:
 def _check_type(cls: type, name: str, value: Any, prefix: str) -> None:
     """Refuse a value of the wrong type for a dataclass field (ints are floats; bools are not numbers)."""
     expected = typing.get_type_hints(cls)[name]
+    options = typing.get_args(expected)
+    if len(options) == 2 and type(None) in options:  # X | None
+        if value is None:
+            return
+        expected = next(t for t in options if t is not type(None))
     ok = {int: lambda v: isinstance(v, int) and not isinstance(v, bool),
           float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
           bool: lambda v: isinstance(v, bool), str: lambda v: isinstance(v, str)}.get(expected)

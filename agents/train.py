@@ -97,7 +97,8 @@ def agent_config(cfg: DictConfig) -> TDMPCConfig:
     group = data.pop("group")
     networks = dict(data.pop("networks"), group=None if group in (None, "none") else str(group),
                     width_strategy=data.pop("width_strategy"),
-                    equivariant=data.pop("equivariant"))
+                    equivariant=data.pop("equivariant"),
+                    allow_approximate=data.pop("allow_approximate", False))
     try:
         return TDMPCConfig.from_dict({"networks": networks, **data})
     except (TypeError, ValueError) as err:
@@ -164,9 +165,15 @@ def validate(cfg: DictConfig) -> tuple[TDMPCConfig, Symmetry | None, int, int]:
         from agents.groups import group_for_task
 
         try:
-            _, exact = group_for_task(agent_cfg.networks.group, symmetry)
+            nets = agent_cfg.networks
+            group, exact = group_for_task(nets.group, symmetry, nets.max_frequency,
+                                          nets.grid_frequency)
         except ValueError as err:
             raise ConfigError(str(err)) from None
+        if group.continuous and not exact and not nets.allow_approximate:
+            raise ConfigError(f"{nets.group} is only an approximate symmetry of {cfg.env.id} "
+                              f"(exact group: {symmetry.exact_group}); set "
+                              "agent.allow_approximate=true to train with it anyway")
         if not exact:
             warnings.warn(f"{agent_cfg.networks.group} is only an approximate symmetry of "
                           f"{cfg.env.id} (exact group: {symmetry.exact_group}); training anyway",

@@ -57,10 +57,13 @@ def test_same_seed_gives_the_same_eval_csv(tmp_path):
 
 
 AGENTS = {"plain": [], "D8": ["agent.group=D8"],
-          "octahedral-pointmass3d": ["env=pointmass3d", "agent.group=octahedral"]}
+          "octahedral-pointmass3d": ["env=pointmass3d", "agent.group=octahedral"],
+          "SO3-pointmass3d": ["env=pointmass3d", "agent.group=SO3"],
+          "O2-reacher": ["env=reacher", "agent.group=O2"]}
 KILLS = [("plain", "seeding:100"), ("plain", "evaluation:200"), ("plain", "checkpoint_write:1"),
          ("plain", "checkpoint_cleanup:2"), ("D8", "update:100"), ("D8", "checkpoint_swap:1"),
-         ("octahedral-pointmass3d", "update:60")]
+         ("octahedral-pointmass3d", "update:60"), ("SO3-pointmass3d", "update:60"),
+         ("O2-reacher", "checkpoint_swap:1")]
 
 
 @pytest.fixture(scope="module")
@@ -135,6 +138,12 @@ def test_changed_options_are_refused_on_resume(tmp_path, capsys):
     (["agent.group=icosahedral"], "acts in 3D but the task is 2D"),
     (["env=reacher", "agent.group=octahedral"], "acts in 3D but the task is 2D"),
     (["env=pointmass3d", "agent.group=D8"], "acts in 2D but the task is 3D"),
+    (["agent.group=O2"], "O2 is only an approximate symmetry of GeoMDP/PointMass2D-v0 (exact "
+                         "group: D4); set agent.allow_approximate=true"),
+    (["agent.group=D8", "agent.networks.max_frequency=2"], "apply to the continuous groups"),
+    (["env=pointmass3d", "agent.group=SO3", "agent.networks.grid_frequency=2"],
+     "grid_frequency must be >= 2 * max_frequency = 4"),
+    (["agent.group=SO2", "agent.networks.max_frequency=two"], "max_frequency must be an integer"),
     (["env=Pendulum-v1", "agent.group=D4"], "needs a task that declares its symmetry"),
     (["train.steps=0"], "train.steps must be >= 1, got 0"),
     (["env=pointmass3d", "env.n_balls=0"], "n_balls must be an integer >= 1"),
