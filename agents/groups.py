@@ -90,7 +90,7 @@ class AgentGroup:
         """The representation on R^d: how positions, velocities and forces move."""
         if self.dim == 3:
             standard = self.escnn.standard_representation  # a method on SO(3)/O(3)
-            return standard() if callable(standard) else standard
+            return standard if isinstance(standard, escnn_group.Representation) else standard()
         return self.escnn.irrep(1, 1) if self.has_reflections else self.escnn.irrep(1)
 
     @functools.cached_property

@@ -233,10 +233,13 @@ class FieldLayerNorm(nn.Module):
         self.bias = nn.Parameter(torch.zeros(len(sizes)))
         index = torch.repeat_interleave(torch.arange(len(sizes)), torch.tensor(sizes))
         self.register_buffer("field_index", index, persistent=False)
+        self.per_channel = all(size == 1 for size in sizes)  # plain: nothing to gather
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         # The tied scale and shift gathered to one per channel, applied inside the kernel
         # (half the time of normalising, then gathering, multiplying and adding).
+        if self.per_channel:
+            return F.layer_norm(x, (self.size,), self.weight, self.bias, self.eps)
         return F.layer_norm(x, (self.size,), self.weight[self.field_index],
                             self.bias[self.field_index], self.eps)
 

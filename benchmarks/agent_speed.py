@@ -6,8 +6,9 @@ horizon-length slices). For the CPU preset (``configs/agent/tdmpc.yaml``) this
 measures both for the plain agent, D8 (PointMass2D) and icosahedral
 (PointMass3D) agents with both width strategies, the ``sqrt`` ones with their
 hidden layers dense (escnn's expanded matrix: the reference) and in the irrep
-basis (``FourierLinear``: the default), and prints ratios to the plain agent on
-the same task. It also counts the planner's FLOPs (as the dense expanded
+basis (``FourierLinear``: the default), the continuous groups' agents (SO2, O2
+beside D8; SO3, O3 beside icosahedral; default band limit and grid), and prints
+ratios to the plain agent on the same task. It also counts the planner's FLOPs (as the dense expanded
 layers it stands for) and compares its achieved FLOP rate with that of a plain
 matrix product of the planner's batch and width.
 
@@ -39,6 +40,14 @@ CONFIGS = [
                                               "agent.networks.layers=fourier"]),
     ("pointmass2d", "D8 sqrt (dense, reference)", ["agent.group=D8", "agent.width_strategy=sqrt",
                                                    "agent.networks.layers=dense"]),
+    ("pointmass2d", "SO2 linear", ["agent.group=SO2", "agent.width_strategy=linear",
+                                   "agent.allow_approximate=true"]),
+    ("pointmass2d", "SO2 sqrt", ["agent.group=SO2", "agent.width_strategy=sqrt",
+                                 "agent.allow_approximate=true"]),
+    ("pointmass2d", "O2 linear", ["agent.group=O2", "agent.width_strategy=linear",
+                                  "agent.allow_approximate=true"]),
+    ("pointmass2d", "O2 sqrt", ["agent.group=O2", "agent.width_strategy=sqrt",
+                                "agent.allow_approximate=true"]),
     ("pointmass3d", "plain", ["agent.group=none"]),
     ("pointmass3d", "icosahedral linear", ["agent.group=icosahedral", "agent.width_strategy=linear"]),
     ("pointmass3d", "icosahedral sqrt (irrep basis)", ["agent.group=icosahedral",
@@ -47,6 +56,10 @@ CONFIGS = [
     ("pointmass3d", "icosahedral sqrt (dense, reference)", ["agent.group=icosahedral",
                                                             "agent.width_strategy=sqrt",
                                                             "agent.networks.layers=dense"]),
+    ("pointmass3d", "SO3 linear", ["agent.group=SO3", "agent.width_strategy=linear"]),
+    ("pointmass3d", "SO3 sqrt", ["agent.group=SO3", "agent.width_strategy=sqrt"]),
+    ("pointmass3d", "O3 linear", ["agent.group=O3", "agent.width_strategy=linear"]),
+    ("pointmass3d", "O3 sqrt", ["agent.group=O3", "agent.width_strategy=sqrt"]),
 ]
 
 # Runs inside the measured checkout (its own agents package), with only the APIs
