@@ -154,24 +154,21 @@ class SpectralLayerNorm(nn.Module):
         if not np.allclose(gram, np.diag(np.diag(gram)), atol=1e-9):
             raise AssertionError("quadrature is not exact to 2L: the Gram matrix is not diagonal")
         offset = sum(rho.group.irrep(*i).size for i in rho.irreps[:trivial[0]])
-        self.trivial = offset
         self.mean_scale = float(samples[0, offset])  # f's value per unit trivial coefficient
         self.register_buffer("square_weights", torch.tensor(np.diag(gram), dtype=torch.float32),
                              persistent=False)
+        self.register_buffer("trivial", torch.eye(rho.size)[offset], persistent=False)
         self.weight = nn.Parameter(torch.ones(self.fields))
         self.bias = nn.Parameter(torch.zeros(self.fields))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         v = x.reshape(*x.shape[:-1], self.fields, self.size)
-        t = self.trivial
-        trivial = v[..., t:t + 1]
-        centred_trivial = trivial - trivial.mean(dim=-2, keepdim=True)
-        v = torch.cat([v[..., :t], centred_trivial, v[..., t + 1:]], dim=-1)
-        var = (v.square() * self.square_weights).sum(-1).mean(-1)[..., None, None]
-        v = v * (torch.rsqrt(var + self.eps) * self.weight[:, None])
-        shift = (self.bias / self.mean_scale)[:, None]
-        v = torch.cat([v[..., :t], v[..., t:t + 1] + shift, v[..., t + 1:]], dim=-1)
-        return v.reshape(x.shape)
+        mean = (v * self.trivial).sum(-1, keepdim=True).mean(-2, keepdim=True)
+        centred = v - mean * self.trivial  # only the trivial coefficient moves
+        var = (centred.square() * self.square_weights).sum(-1).mean(-1)[..., None, None]
+        scale = torch.rsqrt(var + self.eps) * self.weight[:, None]
+        shift = (self.bias / self.mean_scale)[:, None] * self.trivial
+        return (centred * scale + shift).reshape(x.shape)
 
 
 class GridActivation(nn.Module):
