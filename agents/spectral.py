@@ -29,9 +29,10 @@ Fourier nonlinearities). Rotating the coefficients translates the function.
 
 Grids are quadratures that integrate every irrep of frequency <= ``frequency``
 exactly: uniform angles for SO(2) (N = frequency + 1), the same for both
-reflection cosets of O(2), Euler angles ZYZ with uniform alpha, gamma and
-Gauss-Legendre nodes in cos(beta) for SO(3), and SO(3)'s grid with its
-inversions for O(3).
+reflection cosets of O(2); for SO(3) the icosahedral group's 60 rotations up to
+frequency 5, above that Euler angles ZYZ with uniform alpha, gamma and
+Gauss-Legendre nodes in cos(beta) ((f + 1)^2 ceil((f + 1) / 2) points); O(3)
+takes SO(3)'s grid and its inversions.
 """
 
 from __future__ import annotations
@@ -45,6 +46,8 @@ from escnn import nn as enn
 from escnn.group import Group, Representation
 from scipy.spatial.transform import Rotation
 from torch import nn
+
+from geomdp_envs import groups as env_groups
 
 
 @dataclass(frozen=True)
@@ -73,14 +76,20 @@ def quadrature(group: Group, kind: str, frequency: int) -> Quadrature:
         return Quadrature(tuple(elements), np.full(len(elements), 1 / len(elements)), frequency)
     if kind not in ("SO3", "O3"):
         raise ValueError(f"no quadrature for group {kind!r}; valid: SO2, O2, SO3, O3")
-    # The alpha and gamma sums kill every Wigner-D entry but D^l_00(beta) = P_l(cos beta),
-    # a polynomial of degree l <= frequency: Gauss-Legendre with ceil(n / 2) nodes is exact.
-    nodes, node_weights = np.polynomial.legendre.leggauss(math.ceil(n / 2))
-    angles = 2 * math.pi * np.arange(n) / n
-    alpha, cos_beta, gamma = np.meshgrid(angles, nodes, angles, indexing="ij")
-    weights = np.broadcast_to(node_weights[None, :, None], alpha.shape).reshape(-1)
-    euler = np.stack([alpha.ravel(), np.arccos(cos_beta.ravel()), gamma.ravel()], axis=1)
-    matrices = Rotation.from_euler("ZYZ", euler).as_matrix()
+    if frequency <= 5:
+        # The icosahedral group's 60 rotations: no irrep of SO(3) of degree 1..5 has a
+        # vector fixed by all of them, so their average kills every such Wigner-D matrix.
+        matrices = env_groups.group_elements("icosahedral")
+        weights = np.full(len(matrices), 1.0)
+    else:
+        # The alpha and gamma sums kill every Wigner-D entry but D^l_00(beta) = P_l(cos beta),
+        # a polynomial of degree l <= frequency: Gauss-Legendre with ceil(n / 2) nodes is exact.
+        nodes, node_weights = np.polynomial.legendre.leggauss(math.ceil(n / 2))
+        angles = 2 * math.pi * np.arange(n) / n
+        alpha, cos_beta, gamma = np.meshgrid(angles, nodes, angles, indexing="ij")
+        weights = np.broadcast_to(node_weights[None, :, None], alpha.shape).reshape(-1)
+        euler = np.stack([alpha.ravel(), np.arccos(cos_beta.ravel()), gamma.ravel()], axis=1)
+        matrices = Rotation.from_euler("ZYZ", euler).as_matrix()
     if kind == "SO3":
         elements = [group.element(m, param="MAT") for m in matrices]
     else:
