@@ -18,6 +18,7 @@ agent of another checkout (e.g. ``git worktree add /tmp/landed <commit>``) in
 the same run, for "faster than before" ratios.
 
     python benchmarks/agent_speed.py [--threads 1] [--preset tdmpc] [--baseline /tmp/landed]
+                                     [--only plain D8]
 """
 
 from __future__ import annotations
@@ -137,6 +138,10 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=10)
     parser.add_argument("--baseline", type=Path, default=None,
                         help="another checkout whose plain PointMass2D agent to measure alongside")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="baseline and this checkout measured alternately, this many times each")
+    parser.add_argument("--only", nargs="*", default=None,
+                        help="measure only the agents whose label contains one of these words")
     args = parser.parse_args()
     import torch
 
@@ -147,6 +152,8 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     plain: dict[str, float] = {}
     for task, label, overrides in CONFIGS:
+        if args.only is not None and not any(word in label for word in args.only):
+            continue
         r = measure(ROOT, task, overrides, args.threads, args.preset, args.repeats)
         step = r["plan"] + r["update"]
         plain.setdefault(task, step)
@@ -154,16 +161,20 @@ def main() -> None:
               f"| {step * 1e3:.1f} | {step / plain[task]:.2f} | {r['planner_gflops']:.1f} "
               f"| {r['matmul_gflops']:.1f} |", flush=True)
     if args.baseline:
-        r = measure(args.baseline, "pointmass2d", ["agent.group=none"], args.threads, args.preset,
-                    args.repeats)
-        now = measure(ROOT, "pointmass2d", ["agent.group=none"], args.threads, args.preset,
-                      args.repeats)
-        before, after = r["plan"] + r["update"], now["plan"] + now["update"]
-        print(f"\nplain PointMass2D agent step: {args.baseline}: {before * 1e3:.1f} ms "
-              f"(plan {r['plan'] * 1e3:.1f}, update {r['update'] * 1e3:.1f}); this checkout: "
-              f"{after * 1e3:.1f} ms (plan {now['plan'] * 1e3:.1f}, update "
-              f"{now['update'] * 1e3:.1f}); speed-up {before / after:.2f}x")
-
+        # Alternating rounds, so that a change in the machine's load hits both alike;
+        # the medians are reported.
+        before, after = [], []
+        for _ in range(args.rounds):
+            for tree, out in ((args.baseline, before), (ROOT, after)):
+                r = measure(tree, "pointmass2d", ["agent.group=none"], args.threads,
+                            args.preset, args.repeats)
+                out.append((r["plan"] + r["update"], r["plan"], r["update"]))
+        (b, bp, bu), (a, ap, au) = sorted(before)[len(before) // 2], sorted(after)[len(after) // 2]
+        print(f"\nplain PointMass2D agent step, median of {args.rounds} alternating rounds: "
+              f"{args.baseline}: {b * 1e3:.1f} ms (plan {bp * 1e3:.1f}, update {bu * 1e3:.1f}); "
+              f"this checkout: {a * 1e3:.1f} ms (plan {ap * 1e3:.1f}, update {au * 1e3:.1f}); "
+              f"speed-up {b / a:.2f}x (per round: "
+              + ", ".join(f"{x[0] / y[0]:.2f}x" for x, y in zip(before, after)) + ")")
 
 if __name__ == "__main__":
     main()
