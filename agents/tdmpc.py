@@ -16,6 +16,7 @@ from agents.loss import LossConfig, TDMPCLoss
 from agents.networks import NetworkConfig, build_networks
 from agents.planner import MPPIPlanner, NoiseSource, PlannerConfig
 from agents.replay import ReplayConfig
+from agents.spectral import GridActivation
 from agents.world_model import WorldModel
 from geomdp_envs.symmetry import Symmetry
 
@@ -119,6 +120,10 @@ def _check_type(cls: type, name: str, value: Any, prefix: str) -> None:
         raise ValueError(f"{prefix}{name} must be {what}, got {value!r}")
 
 
+def _probe(size: int) -> torch.Tensor:
+    return torch.randn(size, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+
+
 class TDMPCAgent:
     """Acts by planning with the world model; learns from replayed slices."""
 
@@ -187,15 +192,16 @@ class TDMPCAgent:
         """Each equivariant layer's map applied to a fixed probe, from the current
         coefficients: checkpoints store coefficients only, and escnn computes some
         bases numerically (octahedral, icosahedral), so a resume checks that the
-        rebuilt bases turn the same coefficients into the same maps."""
+        rebuilt bases turn the same coefficients into the same maps. Likewise the
+        continuous groups' sampling grids, built from escnn's irreps."""
         out = {}
         for name, module in self.model.named_modules():
             if hasattr(module, "expand") and hasattr(module, "in_type"):
                 weight, bias = module.expand()
-                probe = torch.randn(weight.shape[1], generator=torch.Generator().manual_seed(0),
-                                    dtype=torch.float64)
-                mapped = weight.double().cpu() @ probe
+                mapped = weight.double().cpu() @ _probe(weight.shape[1])
                 out[name] = mapped + (0 if bias is None else bias.double().cpu())
+            elif isinstance(module, GridActivation):  # sampled from escnn's irreps
+                out[name] = module.to_grid.double().cpu().T @ _probe(module.to_grid.shape[0])
         return out
 
     @torch.no_grad()
@@ -224,8 +230,9 @@ class TDMPCAgent:
         for name, saved in state.get("basis_fingerprints", {}).items():
             now = rebuilt.get(name)
             if now is None or not torch.allclose(now, saved.to(now), rtol=1e-4, atol=1e-5):
-                raise ValueError(f"escnn rebuilt a different basis for {name} than the one the "
-                                 "checkpoint was trained with (another escnn version or cache?)")
+                raise ValueError(f"escnn rebuilt a different basis (or sampling grid) for {name} "
+                                 "than the one the checkpoint was trained with (another escnn "
+                                 "version or cache?)")
         self.model_optimizer.load_state_dict(state["model_optimizer"])
         self.policy_optimizer.load_state_dict(state["policy_optimizer"])
         self.generator.set_state(state["generator"])

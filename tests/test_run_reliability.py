@@ -168,22 +168,26 @@ def test_sweep_directories_stay_short_and_the_launcher_uses_one_process_per_core
     assert cfg.hydra.launcher.n_jobs == usable_cores()
 
 
-def test_a_checkpoint_whose_rebuilt_bases_differ_is_refused(tmp_path, capsys):
-    """Checkpoints store basis coefficients, not escnn's bases: if escnn rebuilds a
-    different basis (another version, another cache), resuming must refuse, not run
-    a different network."""
-    assert run(config("env=pointmass3d", "agent.group=octahedral", "train.steps=1000"), tmp_path) == 0
+@pytest.mark.parametrize("agent, flipped", [
+    (["agent.group=octahedral"], None),  # the first equivariant layer's basis
+    (["agent.group=SO3"], "encoder.net.2"),  # a continuous group's sampling grid
+])
+def test_a_checkpoint_whose_rebuilt_bases_differ_is_refused(tmp_path, capsys, agent, flipped):
+    """Checkpoints store basis coefficients, not escnn's bases (nor the grids sampled
+    from its irreps): if escnn rebuilds a different one (another version, another
+    cache), resuming must refuse, not run a different network."""
+    assert run(config("env=pointmass3d", *agent, "train.steps=1000"), tmp_path) == 0
     agent_file = tmp_path / "checkpoint/agent.pt"
     saved = torch.load(agent_file, weights_only=False)
     fingerprints = saved["agent"]["basis_fingerprints"]
     assert fingerprints, "equivariant layers leave fingerprints"
-    name = next(iter(fingerprints))
+    name = flipped or next(iter(fingerprints))
     fingerprints[name] = -fingerprints[name]  # as a sign-flipped basis would give
     torch.save(saved, agent_file)
     manifest = json.loads((tmp_path / "checkpoint/manifest.json").read_text())
     manifest["files"]["agent.pt"] = checkpoint._sha256(agent_file)
     (tmp_path / "checkpoint/manifest.json").write_text(json.dumps(manifest))
     capsys.readouterr()
-    assert run(config("env=pointmass3d", "agent.group=octahedral", "train.steps=2000"), tmp_path) == 2
+    assert run(config("env=pointmass3d", *agent, "train.steps=2000"), tmp_path) == 2
     err = capsys.readouterr().err
     assert "escnn rebuilt a different basis" in err
