@@ -198,23 +198,78 @@ def is_regular(layout: Layout) -> bool:
 def make_linear(in_layout: Layout, out_layout: Layout, bias: bool = True,
                 kind: str = "dense") -> nn.Module:
     """``nn.Linear`` between plain layouts; between field types ``EquivariantLinear``
-    (escnn's dense expansion), or with ``kind="fourier"`` and regular fields on both
-    sides ``FourierLinear`` (the same maps, applied block-diagonally in the irrep basis)."""
+    (escnn's dense expansion), or with ``kind="fourier"`` and regular output fields
+    ``FourierLinear`` (the same maps, applied block-diagonally in the irrep basis)
+    from the input's leading regular fields, plus an ``EquivariantLinear`` from any
+    fields after them (``SplitLinear``)."""
     if kind not in LINEAR_KINDS:
         raise ValueError(f"layers={kind!r}; valid: {', '.join(LINEAR_KINDS)}")
     if isinstance(in_layout, int) and isinstance(out_layout, int):
         return nn.Linear(in_layout, out_layout, bias=bias)
     if isinstance(in_layout, int) or isinstance(out_layout, int):
         raise TypeError("a linear layer maps plain to plain or field type to field type")
-    if kind == "fourier" and is_regular(in_layout) and is_regular(out_layout):
-        from agents.fourier import FourierLinear
-
-        return FourierLinear(in_layout, out_layout, bias=bias)
     # Biases start as nn.Linear's do (uniform, +-1/sqrt(fan_in)), not at escnn's zero:
     # an equivariant map from vector fields has zero mean over its output channels,
     # so with zero biases the LayerNorm after it would divide out |input| entirely.
-    return EquivariantLinear(in_layout, out_layout, bias=bias,
-                             bias_init=1 / math.sqrt(layout_size(in_layout)))
+    bias_init = 1 / math.sqrt(layout_size(in_layout))
+    regular, rest = _regular_prefix(in_layout)
+    if kind == "fourier" and is_regular(out_layout) and regular is not None:
+        from agents.fourier import FourierLinear
+
+        fourier = FourierLinear(regular, out_layout, bias=bias, bias_init=bias_init)
+        if rest is None:
+            return fourier
+        return SplitLinear(fourier, EquivariantLinear(rest, out_layout, bias=False))
+    return EquivariantLinear(in_layout, out_layout, bias=bias, bias_init=bias_init)
+
+
+def _regular_prefix(layout: enn.FieldType) -> tuple[enn.FieldType | None, enn.FieldType | None]:
+    """(the leading regular fields, the fields after them), as field types (None if empty)."""
+    reps = layout.representations
+    regular_name = None if layout.gspace.fibergroup.continuous else (
+        layout.gspace.fibergroup.regular_representation.name)
+    n = next((i for i, rep in enumerate(reps) if rep.name != regular_name), len(reps))
+    return (enn.FieldType(layout.gspace, reps[:n]) if n else None,
+            enn.FieldType(layout.gspace, reps[n:]) if n < len(reps) else None)
+
+
+class SplitLinear(nn.Module):
+    """An equivariant map from (regular fields, other fields), as the sum of a
+    ``FourierLinear`` on the regular part and an ``EquivariantLinear`` on the rest.
+
+    The input layers of dynamics, reward and Q read (latent, action): the latent's
+    regular-to-regular block is most of the layer and runs in the irrep basis. A
+    linear map from a direct sum is the sum of maps from its summands, so this is
+    escnn's function class with its parameter count (the bias is the Fourier
+    part's). Each part is initialised for the layer's whole fan-in, as escnn's
+    single layer is.
+    """
+
+    def __init__(self, regular: nn.Module, rest: EquivariantLinear) -> None:
+        super().__init__()
+        self.regular, self.rest = regular, rest
+        self.split = regular.in_type.size
+        total = self.split + rest.in_type.size
+        with torch.no_grad():
+            regular.weights.mul_(math.sqrt(self.split / total))
+            rest.layer.weights.mul_(math.sqrt(rest.in_type.size / total))
+
+    @property
+    def in_type(self) -> enn.FieldType:
+        return self.regular.in_type + self.rest.in_type
+
+    @property
+    def out_type(self) -> enn.FieldType:
+        return self.regular.out_type
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.regular(x[..., :self.split]) + self.rest(x[..., self.split:])
+
+    def expand(self) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """(weight, bias) of the equivalent dense map."""
+        weight, bias = self.regular.expand()
+        rest_weight, _ = self.rest.expand()
+        return torch.cat([weight, rest_weight], dim=1), bias
 
 
 class FieldLayerNorm(nn.Module):

@@ -54,7 +54,7 @@ class NetworkConfig:
     num_q: int = 2
     equivariant: dict[str, bool] = field(
         default_factory=lambda: {name: True for name in COMPONENTS})
-    # Hidden-to-hidden equivariant layers: dense (escnn's expanded matrix), fourier
+    # Equivariant layers into regular fields: dense (escnn's expanded matrix), fourier
     # (block-diagonal in the irrep basis), or auto: fourier for sqrt width, where it
     # is faster, dense for linear width (few fields), where it is not (BENCHMARKS.md).
     layers: str = "auto"
@@ -111,7 +111,7 @@ class FieldMLP(nn.Module):
             layers += [make_linear(previous, layout, kind=linear_kind),
                        *norm_and_activation(layout, activation_name, grid)]
             previous = layout
-        layers.append(make_linear(previous, out_layout))
+        layers.append(make_linear(previous, out_layout, kind=linear_kind))
         self.net = nn.Sequential(*layers)
         self.in_layout, self.out_layout = in_layout, out_layout
 

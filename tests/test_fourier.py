@@ -220,3 +220,31 @@ def test_rejects_fields_that_are_not_regular():
     other = make_group("C8")
     with pytest.raises(ValueError, match="share their group"):
         FourierLinear(regular, other.gspace.type(other.regular))
+
+
+@pytest.mark.parametrize("name", ["D8", "icosahedral"])
+def test_split_layer_from_latent_and_action_is_escnns_layer(name):
+    """Input layers read (regular latent, action): a FourierLinear on the latent plus an
+    EquivariantLinear on the action. Same parameter count as escnn's single layer, its
+    forward equals its dense expansion, it is exactly equivariant, and its expanded
+    entries have escnn's initial scale (variance ~ 1/fan_in of the whole input)."""
+    from agents.layers import EquivariantLinear, SplitLinear, make_linear
+
+    group = make_group(name)
+    latent = group.gspace.type(*[group.regular] * 3)
+    action = group.gspace.type(group.standard, group.standard)
+    out = group.gspace.type(*[group.regular] * 4)
+    torch.manual_seed(0)
+    split = make_linear(latent + action, out, kind="fourier").double()
+    dense = make_linear(latent + action, out, kind="dense").double()
+    assert isinstance(split, SplitLinear) and isinstance(dense, EquivariantLinear)
+    assert sum(p.numel() for p in split.parameters()) == sum(p.numel() for p in dense.parameters())
+    x = torch.randn(7, split.in_type.size, dtype=torch.float64)
+    weight, bias = split.expand()
+    torch.testing.assert_close(split(x), x @ weight.T + bias)
+    reps_in, reps_out = rep_matrices(split.in_type), rep_matrices(split.out_type)
+    for g_in, g_out in zip(reps_in[:12], reps_out[:12]):
+        torch.testing.assert_close(split(x @ g_in.T), split(x) @ g_out.T)
+    dense_weight, _ = dense.expand()
+    ratio = (weight.var() / dense_weight.var()).item()
+    assert 0.6 < ratio < 1.6, ratio
