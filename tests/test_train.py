@@ -141,8 +141,8 @@ def test_changed_options_are_refused_on_resume(tmp_path, capsys):
     (["agent.group=O2"], "O2 is only an approximate symmetry of GeoMDP/PointMass2D-v0 (exact "
                          "group: D4); set agent.allow_approximate=true"),
     (["agent.group=D8", "agent.networks.max_frequency=2"], "apply to the continuous groups"),
-    (["env=pointmass3d", "agent.group=SO3", "agent.networks.grid_frequency=2"],
-     "grid_frequency must be >= 2 * max_frequency = 4"),
+    (["env=pointmass3d", "agent.group=SO3", "agent.networks.max_frequency=2",
+      "agent.networks.grid_frequency=3"], "grid_frequency must be >= 2 * max_frequency = 4"),
     (["agent.group=SO2", "agent.networks.max_frequency=two"], "max_frequency must be an integer"),
     (["env=Pendulum-v1", "agent.group=D4"], "needs a task that declares its symmetry"),
     (["train.steps=0"], "train.steps must be >= 1, got 0"),
