@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import io
 import math
 from collections.abc import Iterator
 
@@ -79,7 +80,10 @@ class EquivariantLinear(nn.Module):
     def __init__(self, in_type: enn.FieldType, out_type: enn.FieldType, bias: bool = True,
                  bias_init: float = 0.0) -> None:
         super().__init__()
-        self.layer = enn.Linear(in_type, out_type, bias=bias)
+        # escnn reports on stdout each tensor-product decomposition it solves (continuous
+        # groups, the first time a band limit is used); the result is all that matters.
+        with contextlib.redirect_stdout(io.StringIO()):
+            self.layer = enn.Linear(in_type, out_type, bias=bias)
         # escnn caches one basis module per pair of representations and shares it
         # between layers, so .to()/.double() on one network would change the others'
         # buffers (seen: a float network failing after another was made double). Own a copy.
