@@ -9,8 +9,9 @@ seed), and draws, per group, the mean evaluation return over seeds with a 95%
 bootstrap confidence interval (``scipy.stats.bootstrap``). Runs of unequal
 length, or still in progress, are fine: at each evaluation step, the seeds
 that have reached it are used. Prints a markdown table of final returns (mean
-with 95% CI, IQM) and of the environment steps each seed took to reach
-``--threshold``.
+with 95% CI, IQM), of each seed's mean return over its evaluations (the area
+under its curve: sample efficiency; compare runs of equal length) and of the
+environment steps each seed took to reach ``--threshold``.
 """
 
 from __future__ import annotations
@@ -99,8 +100,9 @@ def steps_to_threshold(run: Run, threshold: float) -> int | None:
 
 def table(groups: dict[str, list[Run]], threshold: float | None) -> str:
     header = ("| runs | seeds | env steps | final return (mean, 95% CI) | IQM "
+              "| mean return over all evaluations (mean, 95% CI) "
               "| final return with training noise (mean, 95% CI) |")
-    sep = "|---|---|---|---|---|---|"
+    sep = "|---|---|---|---|---|---|---|"
     if threshold is not None:
         header += f" env steps to reach {threshold:g} (per seed) |"
         sep += "---|"
@@ -113,8 +115,11 @@ def table(groups: dict[str, list[Run]], threshold: float | None) -> str:
         noisy = np.array([r.noisy_returns[-1] for r in runs])
         noisy_cell = ("–" if np.isnan(noisy).any() else
                       "{:.1f} [{:.1f}, {:.1f}]".format(*mean_ci(noisy)))
+        # The area under the curve per seed, divided by its length: sample efficiency.
+        area_cell = "{:.1f} [{:.1f}, {:.1f}]".format(
+            *mean_ci(np.array([r.returns.mean() for r in runs])))
         row = (f"| {label} | {len(runs)} | {'/'.join(map(str, steps))} | "
-               f"{mean:.1f} [{low:.1f}, {high:.1f}] | {iqm:.1f} | {noisy_cell} |")
+               f"{mean:.1f} [{low:.1f}, {high:.1f}] | {iqm:.1f} | {area_cell} | {noisy_cell} |")
         if threshold is not None:
             reached = [steps_to_threshold(r, threshold) for r in runs]
             row += " " + ", ".join("–" if s is None else str(s) for s in reached) + " |"

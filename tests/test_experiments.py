@@ -59,7 +59,8 @@ def test_plot_handles_unequal_and_unfinished_runs(tmp_path, capsys):
     assert out.stat().st_size > 10_000
     table = capsys.readouterr().out
     assert "| group=none | 2 | 2000/3000 |" in table
-    assert "| group=D8 | 1 | 3000 | 960.0 [960.0, 960.0] | 960.0 | – | 1000 |" in table
+    assert ("| group=D8 | 1 | 3000 | 960.0 [960.0, 960.0] | 960.0 | 702.5 [702.5, 702.5] | – "
+            "| 1000 |") in table
     assert "3000, 2000 |" in table  # steps to 800, per seed
     runs = plot.group_runs(plot.find_runs([tmp_path]))
     steps, mean, low, high, n = plot.curve(runs["group=none"])
