@@ -60,10 +60,11 @@ def find_runs(paths: list[Path]) -> list[Run]:
     return runs
 
 
-def group_runs(runs: list[Run]) -> dict[str, list[Run]]:
-    """Runs keyed by the options that differ between them (seed and display options aside)."""
+def group_runs(runs: list[Run], ignored: tuple[str, ...] = ()) -> dict[str, list[Run]]:
+    """Runs keyed by the options that differ between them (seed and display options
+    aside, and ``ignored``: e.g. an option added later whose default changes nothing)."""
     keys = sorted({k for r in runs for k in r.options
-                   if not k.startswith(IGNORED_KEYS)
+                   if not k.startswith(IGNORED_KEYS + tuple(ignored))
                    and len({str(x.options.get(k)) for x in runs}) > 1})
     groups: dict[str, list[Run]] = {}
     for r in runs:
@@ -164,12 +165,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--markdown", type=Path, help="also write the table to this file")
     parser.add_argument("--complete", type=int, default=None,
                         help="only runs whose last evaluation is at this env step or later")
+    parser.add_argument("--ignore", action="append", default=[],
+                        help="an option not to group runs by (e.g. one added later with a "
+                             "default that changes nothing: agent.networks.layers)")
     args = parser.parse_args(argv)
     runs = [r for r in find_runs(args.paths) if args.complete is None or r.steps[-1] >= args.complete]
     if not runs:
         raise SystemExit(f"geomdp-plot: error: no run directories (eval.csv + config.yaml) under "
                          f"{', '.join(map(str, args.paths))}")
-    groups = group_runs(runs)
+    groups = group_runs(runs, tuple(args.ignore))
     references = []
     for ref in args.reference:
         value, _, name = ref.partition(":")

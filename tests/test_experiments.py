@@ -65,6 +65,12 @@ def test_plot_handles_unequal_and_unfinished_runs(tmp_path, capsys):
     runs = plot.group_runs(plot.find_runs([tmp_path]))
     steps, mean, low, high, n = plot.curve(runs["group=none"])
     assert list(n) == [2, 2, 2, 1] and low[2] <= mean[2] <= high[2]
+    # an option only some runs have splits them, unless ignored
+    with (tmp_path / "a/2/config.yaml").open("a") as f:
+        f.write("  layers: auto\n")
+    found = plot.find_runs([tmp_path])
+    assert "group=none, layers=auto" in plot.group_runs(found)
+    assert set(plot.group_runs(found, ("agent.layers",))) == {"group=none", "group=D8"}
 
 
 def test_plot_without_runs_is_a_clear_error(tmp_path):
