@@ -228,11 +228,14 @@ def valid_groups(symmetry: Symmetry) -> tuple[str, ...]:
 
 
 def group_for_task(name: str, symmetry: Symmetry, max_frequency: int | None = None,
-                   grid_frequency: int | None = None) -> tuple[AgentGroup, bool]:
+                   grid_frequency: int | None = None, allow_approximate: bool = True,
+                   task: str = "this task") -> tuple[AgentGroup, bool]:
     """The group ``name`` for a task, and whether it is an exact symmetry of it.
 
     Raises a ValueError listing the valid groups when ``name`` is unknown or does
-    not act on the task (a planar group for a 3D task, or the reverse).
+    not act on the task (a planar group for a 3D task, or the reverse), and one
+    for a continuous group that is only an approximate symmetry of ``task``
+    unless ``allow_approximate``.
     """
     valid = ", ".join(valid_groups(symmetry))
     if name not in CONTINUOUS_GROUPS and not _PLANAR.match(name) and name not in SPATIAL_GROUPS:
@@ -252,6 +255,10 @@ def group_for_task(name: str, symmetry: Symmetry, max_frequency: int | None = No
     if not inside:
         raise ValueError(f"group {name} is not a subgroup of the task's "
                          f"{symmetry.continuous_group}; valid groups: {valid}")
+    if group.continuous and not exact and not allow_approximate:
+        raise ValueError(f"{name} is only an approximate symmetry of {task} (exact group: "
+                         f"{symmetry.exact_group}); set agent.allow_approximate=true to train "
+                         "with it anyway")
     return group, exact
 
 

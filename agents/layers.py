@@ -192,11 +192,10 @@ LINEAR_KINDS = ("dense", "fourier")
 def is_regular(layout: Layout) -> bool:
     """Whether a layout is made only of regular fields of a finite group (a hidden
     layer of an equivariant net; continuous groups' hidden fields are band-limited)."""
-    if isinstance(layout, int) or layout.gspace.fibergroup.continuous:
+    if isinstance(layout, int):
         return False
-    return all(
-        rep.name == layout.gspace.fibergroup.regular_representation.name
-        for rep in layout.representations)
+    regular, rest = _regular_prefix(layout)
+    return regular is not None and rest is None
 
 
 def make_linear(in_layout: Layout, out_layout: Layout, bias: bool = True,
@@ -216,8 +215,8 @@ def make_linear(in_layout: Layout, out_layout: Layout, bias: bool = True,
     # an equivariant map from vector fields has zero mean over its output channels,
     # so with zero biases the LayerNorm after it would divide out |input| entirely.
     bias_init = 1 / math.sqrt(layout_size(in_layout))
-    regular, rest = _regular_prefix(in_layout)
-    if kind == "fourier" and is_regular(out_layout) and regular is not None:
+    regular, rest = _regular_prefix(in_layout) if kind == "fourier" else (None, None)
+    if regular is not None and is_regular(out_layout):
         from agents.fourier import FourierLinear
 
         fourier = FourierLinear(regular, out_layout, bias=bias, bias_init=bias_init)

@@ -241,11 +241,7 @@ def build_networks(config: NetworkConfig, symmetry: Symmetry | None,
                          "(a GeoMDP task); use group=none for other environments")
     else:
         group, exact = group_for_task(config.group, symmetry, config.max_frequency,
-                                      config.grid_frequency)
-        if group.continuous and not exact and not config.allow_approximate:
-            raise ValueError(f"{config.group} is only an approximate symmetry of this task "
-                             f"(exact group: {symmetry.exact_group}); set "
-                             "agent.allow_approximate=true to train with it anyway")
+                                      config.grid_frequency, config.allow_approximate)
         observation, action = symmetry.observation, symmetry.action
     use = {name: group is not None and config.equivariant.get(name, True) for name in COMPONENTS}
     if (use["q"] or use["policy"]) and not use["transition"]:

@@ -164,16 +164,12 @@ def validate(cfg: DictConfig) -> tuple[TDMPCConfig, Symmetry | None, int, int]:
                               "use agent.group=none")
         from agents.groups import group_for_task
 
+        nets = agent_cfg.networks
         try:
-            nets = agent_cfg.networks
-            group, exact = group_for_task(nets.group, symmetry, nets.max_frequency,
-                                          nets.grid_frequency)
+            _, exact = group_for_task(nets.group, symmetry, nets.max_frequency,
+                                      nets.grid_frequency, nets.allow_approximate, cfg.env.id)
         except ValueError as err:
             raise ConfigError(str(err)) from None
-        if group.continuous and not exact and not nets.allow_approximate:
-            raise ConfigError(f"{nets.group} is only an approximate symmetry of {cfg.env.id} "
-                              f"(exact group: {symmetry.exact_group}); set "
-                              "agent.allow_approximate=true to train with it anyway")
         if not exact:
             warnings.warn(f"{agent_cfg.networks.group} is only an approximate symmetry of "
                           f"{cfg.env.id} (exact group: {symmetry.exact_group}); training anyway",
