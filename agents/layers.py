@@ -26,12 +26,10 @@ import torch.nn.functional as F
 from escnn import nn as enn
 from torch import nn
 
+from agents.activations import activation
 from agents.spectral import GridActivation, Quadrature, SpectralLayerNorm
 
 Layout = int | enn.FieldType
-
-ACTIVATIONS = {"mish": nn.Mish, "elu": nn.ELU, "relu": nn.ReLU, "silu": nn.SiLU}
-
 
 def layout_size(layout: Layout) -> int:
     return layout if isinstance(layout, int) else layout.size
@@ -300,13 +298,6 @@ class FieldLayerNorm(nn.Module):
             return F.layer_norm(x, (self.size,), self.weight, self.bias, self.eps)
         return F.layer_norm(x, (self.size,), self.weight[self.field_index],
                             self.bias[self.field_index], self.eps)
-
-
-def activation(name: str) -> nn.Module:
-    """A pointwise nonlinearity by name (exact on regular fields)."""
-    if name not in ACTIVATIONS:
-        raise ValueError(f"unknown activation {name!r}; valid: {', '.join(ACTIVATIONS)}")
-    return ACTIVATIONS[name]()
 
 
 def norm_and_activation(layout: Layout, activation_name: str,

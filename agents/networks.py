@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 import torch
 from torch import nn
 
+from agents.activations import ACTIVATIONS
 from agents.groups import AgentGroup, field_type, group_for_task
 from agents.layers import (
-    ACTIVATIONS,
     LINEAR_KINDS,
     Layout,
     concat,

@@ -94,8 +94,14 @@ def timed(fn):
     for _ in range(repeats):
         fn()
     return (time.perf_counter() - start) / repeats
-plan = timed(lambda: agent.act(obs, step=10**6, explore=True))
-update = timed(lambda: agent.update(sample_slices(buffer, agent_cfg.horizon)))
+act = lambda: agent.act(obs, step=10**6, explore=True)
+learn = lambda: agent.update(sample_slices(buffer, agent_cfg.horizon))
+# Warm up as training does, plans and updates alternating, before timing either, so
+# that a plan is not timed in a process that has never sampled nor updated.
+for _ in range(3):
+    act(); learn()
+plan = timed(act)
+update = timed(learn)
 def dense_flops(module):
     total = 0
     for m in module.modules():

@@ -1,0 +1,59 @@
+"""Pointwise nonlinearities by name, with an ELU built from vectorised kernels.
+
+Why not ``nn.ELU``: on the CPU builds this project runs on (torch 2.14, x86),
+ATen's ``elu`` and ``elu_backward`` evaluate ``expm1`` one element at a time,
+while ``exp``, ``clamp`` and arithmetic are vectorised: ``F.elu`` on the
+planner's [268, 128] hidden batch costs about 8x as much as ``torch.exp`` on it
+and was the largest single cost of planning (``BENCHMARKS.md``, "Agent speed").
+``ELU`` below computes ``max(exp(min(x, 0)) - 1, x)``: equal to ``x``
+exactly where x > 0, and within one float32 ulp of 1 (6e-8, absolute) of
+``expm1`` elsewhere; its backward reuses the output (``min(y, 0) + 1``).
+Pointwise, so it commutes with regular representations like any other.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+
+def _elu(x: torch.Tensor) -> torch.Tensor:
+    # exp(x) - 1 >= x for every x, with exp(min(x, 0)) - 1 = 0 for x > 0: so the maximum
+    # of the two is x exactly for x > 0 and exp(x) - 1 otherwise. One new buffer.
+    y = x.clamp(max=0).exp_().sub_(1)
+    return torch.maximum(y, x, out=y)
+
+
+class _ELUFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx: torch.autograd.function.FunctionCtx, x: torch.Tensor) -> torch.Tensor:
+        y = _elu(x)
+        ctx.save_for_backward(y)
+        return y
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx: torch.autograd.function.FunctionCtx, grad: torch.Tensor) -> torch.Tensor:
+        (y,) = ctx.saved_tensors
+        # d/dx elu = 1 for x > 0, exp(x) = y + 1 otherwise: min(y, 0) + 1 covers both.
+        return y.clamp(max=0).add_(1).mul_(grad)
+
+
+class ELU(nn.Module):
+    """ELU with alpha 1 (TD-MPC's activation) from vectorised kernels; see the module doc."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if x.requires_grad and torch.is_grad_enabled():
+            return _ELUFunction.apply(x)
+        return _elu(x)
+
+
+ACTIVATIONS: dict[str, type[nn.Module]] = {"mish": nn.Mish, "elu": ELU, "relu": nn.ReLU,
+                                           "silu": nn.SiLU}
+
+
+def activation(name: str) -> nn.Module:
+    """A pointwise nonlinearity by name (exact on regular fields)."""
+    if name not in ACTIVATIONS:
+        raise ValueError(f"unknown activation {name!r}; valid: {', '.join(ACTIVATIONS)}")
+    return ACTIVATIONS[name]()
