@@ -95,28 +95,30 @@ class TDMPCLoss(LossModule):
             target_q = self.target_model.q(z_next, next_action).min(dim=0).values
             td_target = reward + cfg.discount * not_done * target_q
 
+        # The latent rollout is sequential; everything evaluated along it (Q, reward,
+        # the losses) takes all horizon steps in one batch: the same sums as TD-MPC's
+        # per-step loop, in a fifth of the network calls.
         z = model.encode(obs[:, 0])
-        latents, q_first = [], None
-        consistency = reward_loss = value_loss = priority = 0.0
+        rollout = [z]
         for t in range(horizon):
-            latents.append(z.detach())
-            q = model.q(z, action[:, t])
-            q_first = q.detach() if q_first is None else q_first
-            reward_pred = model.reward(z, action[:, t])
-            z = model.next(z, action[:, t])
-            rho = cfg.rho ** t
-            consistency = consistency + rho * F.mse_loss(z, target_z[:, t], reduction="none").mean(-1)
-            reward_loss = reward_loss + rho * F.mse_loss(reward_pred, reward[:, t],
-                                                         reduction="none").squeeze(-1)
-            value_loss = value_loss + rho * F.mse_loss(
-                q, td_target[:, t].expand_as(q), reduction="none").sum(0).squeeze(-1)
-            priority = priority + rho * (q - td_target[:, t]).abs().sum(0).squeeze(-1)
+            rollout.append(model.next(rollout[-1], action[:, t]))
+        latents = torch.stack(rollout[:-1], dim=1)  # z_0 .. z_{H-1}: [batch, horizon, latent]
+        predicted = torch.stack(rollout[1:], dim=1)  # d(z_t, a_t)
+        q = model.q(latents, action)  # [num_q, batch, horizon, 1]
+        reward_pred = model.reward(latents, action)
+        rho = cfg.rho ** torch.arange(horizon, device=obs.device, dtype=obs.dtype)
+        consistency = (rho * F.mse_loss(predicted, target_z, reduction="none").mean(-1)).sum(-1)
+        reward_loss = (rho * F.mse_loss(reward_pred, reward, reduction="none").squeeze(-1)).sum(-1)
+        td_error = q - td_target
+        value_loss = (rho * td_error.square().sum(0).squeeze(-1)).sum(-1)
+        priority = (rho * td_error.abs().sum(0).squeeze(-1)).sum(-1)
+        q_first = q[:, :, 0].detach()
 
         model_loss = (cfg.consistency_coef * consistency + cfg.reward_coef * reward_loss
                       + cfg.value_coef * value_loss)
         return TensorDict({
             "loss_model": (model_loss * weights).mean() / horizon,
-            "loss_pi": self.policy_loss(torch.stack(latents, dim=1)),
+            "loss_pi": self.policy_loss(latents.detach()),
             "consistency": consistency.mean().detach(),
             "reward_error": reward_loss.mean().detach(),
             "value_error": value_loss.mean().detach(),

@@ -1,0 +1,116 @@
+"""TD-MPC's loss, batched over the horizon, against TD-MPC's per-step loop.
+
+``TDMPCLoss`` evaluates Q and the reward for all horizon steps in one call;
+``reference_losses`` below is the loop of TD-MPC's ``update`` (Hansen et al.
+2022, Algorithm 1), one network call per step. Both must give the same losses,
+priorities and gradients, plain and equivariant.
+"""
+
+import gymnasium
+import pytest
+import torch
+import torch.nn.functional as F
+from tensordict import TensorDict
+
+from agents import NetworkConfig, build_networks
+from agents.layers import expansion_scope
+from agents.loss import LossConfig, TDMPCLoss
+from agents.world_model import WorldModel
+
+BATCH, HORIZON = 16, 4
+
+
+def make_loss(group: str) -> TDMPCLoss:
+    symmetry = gymnasium.make("GeoMDP/PointMass2D-v0").unwrapped.symmetry
+    torch.manual_seed(0)
+    networks = build_networks(NetworkConfig(group=group, hidden_dim=32, latent_dim=16,
+                                            hidden_layers=2), symmetry)
+    model = WorldModel(networks, symmetry.action)
+    loss = TDMPCLoss(model, LossConfig())
+    with torch.no_grad():  # a target that differs from the online model
+        for p in loss.target_model.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    return loss
+
+
+def make_batch() -> TensorDict:
+    g = torch.Generator().manual_seed(1)
+    obs = torch.randn(BATCH, HORIZON + 1, 4, generator=g)
+    return TensorDict({
+        "observation": obs[:, :-1],
+        "action": torch.rand(BATCH, HORIZON, 2, generator=g) * 1.4 - 0.7,
+        "next": {"observation": obs[:, 1:], "reward": torch.rand(BATCH, HORIZON, 1, generator=g),
+                 "terminated": torch.rand(BATCH, HORIZON, 1, generator=g) < 0.1},
+        "priority_weight": torch.rand(BATCH, HORIZON, generator=g) + 0.5,
+    }, batch_size=[BATCH, HORIZON])
+
+
+def reference_losses(loss: TDMPCLoss, batch: TensorDict) -> dict[str, torch.Tensor]:
+    """TD-MPC's loop: per step t, Q(z_t, a_t), R(z_t, a_t), z_{t+1} = d(z_t, a_t)."""
+    cfg, model = loss.config, loss.model
+    obs, action = batch["observation"], batch["action"]
+    next_obs, reward = batch["next", "observation"], batch["next", "reward"]
+    not_done = 1.0 - batch["next", "terminated"].float()
+    with torch.no_grad():
+        z_next = model.encode(next_obs)
+        target_z = loss.target_model.encode(next_obs)
+        noise = torch.randn(*z_next.shape[:-1], model.action_dim)
+        next_action = model.pi(z_next, cfg.policy_noise, noise)
+        td_target = reward + cfg.discount * not_done * loss.target_model.q(
+            z_next, next_action).min(dim=0).values
+    z = model.encode(obs[:, 0])
+    consistency = reward_loss = value_loss = priority = 0.0
+    latents = []
+    for t in range(HORIZON):
+        latents.append(z.detach())
+        q = model.q(z, action[:, t])
+        reward_pred = model.reward(z, action[:, t])
+        z = model.next(z, action[:, t])
+        rho = cfg.rho ** t
+        consistency = consistency + rho * ((z - target_z[:, t]) ** 2).mean(-1)
+        reward_loss = reward_loss + rho * ((reward_pred - reward[:, t]) ** 2).squeeze(-1)
+        value_loss = value_loss + rho * ((q - td_target[:, t]) ** 2).sum(0).squeeze(-1)
+        priority = priority + rho * (q - td_target[:, t]).abs().sum(0).squeeze(-1)
+    model_loss = (cfg.consistency_coef * consistency + cfg.reward_coef * reward_loss
+                  + cfg.value_coef * value_loss)
+    return {"loss_model": (model_loss * batch["priority_weight"][:, 0]).mean() / HORIZON,
+            "loss_pi": loss.policy_loss(torch.stack(latents, dim=1)),
+            "consistency": consistency.mean(), "reward_error": reward_loss.mean(),
+            "value_error": value_loss.mean(), "priority": priority}
+
+
+def gradients(loss: TDMPCLoss, total: torch.Tensor) -> list[torch.Tensor]:
+    params = [p for p in loss.model.parameters() if p.requires_grad]
+    return torch.autograd.grad(total, params, allow_unused=True, materialize_grads=True)
+
+
+@pytest.mark.parametrize("group", ["none", "D4"])
+def test_batched_horizon_equals_tdmpc_per_step_loop(group: str) -> None:
+    loss, batch = make_loss(group), make_batch()
+    torch.manual_seed(2)
+    got = loss(batch)
+    torch.manual_seed(2)  # the same noise for pi in the TD target and the policy loss
+    with expansion_scope(loss.model, loss.target_model):
+        want = reference_losses(loss, batch)
+    for key, value in want.items():
+        torch.testing.assert_close(got[key], value.detach() if key != "loss_model" else value,
+                                   rtol=1e-5, atol=1e-6, msg=key)
+    assert got["loss_model"] > 0 and got["value_error"] > 0  # not a vacuous comparison
+    ours = gradients(loss, got["loss_model"] + got["loss_pi"])
+    theirs = gradients(loss, want["loss_model"] + want["loss_pi"])
+    for a, b in zip(ours, theirs, strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-6)
+    assert any(a.abs().sum() > 0 for a in ours)
+
+
+def test_a_wrong_step_weight_is_detected() -> None:
+    """The comparison above can fail: the reference with rho^(t+1) differs."""
+    loss, batch = make_loss("none"), make_batch()
+    torch.manual_seed(2)
+    got = loss(batch)
+    loss.config.rho = 0.25  # what the loop would compute with a mis-indexed weight
+    torch.manual_seed(2)
+    with expansion_scope(loss.model, loss.target_model):
+        want = reference_losses(loss, batch)
+    assert not torch.allclose(got["loss_model"], want["loss_model"], rtol=1e-3)
+    assert F.l1_loss(got["priority"], want["priority"]) > 1e-4
