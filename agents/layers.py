@@ -57,22 +57,59 @@ def is_pointwise(layout: Layout) -> bool:
         "pointwise" in rep.supported_nonlinearities for rep in layout.representations)
 
 
-class EquivariantLinear(nn.Module):
+class ScopedExpansion(nn.Module):
+    """A module whose parameters are mapped to the tensors it applies (``expand``).
+
+    Outside an ``expansion_scope`` the map runs at every call, so the result always
+    reflects the parameters as they are now, however they were written (optimiser,
+    ``SoftUpdate`` through ``.data``, ``load_state_dict``, ``TensorDict.to_module``).
+    Inside one it runs once, at the scope's entry, and every call reuses it: the
+    scope is the explicit refresh point; nothing outlives it. An earlier design
+    cached across calls keyed on the parameters' version counters and was
+    silently stale after writes through ``.data`` (TorchRL's ``SoftUpdate``, fused
+    Adam): the target network never moved.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._scoped: tuple[tuple[torch.Tensor | None, ...], torch.Tensor,
+                            torch.Tensor | None] | None = None
+
+    def _current_parameters(self) -> tuple[torch.Tensor | None, ...]:
+        raise NotImplementedError
+
+    def expand(self) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """(weight, bias) as applied, freshly computed from the parameters."""
+        raise NotImplementedError
+
+    def open_scope(self) -> None:
+        """Expand now and reuse the result until ``expansion_scope`` restores the outer one."""
+        weight, bias = self.expand()
+        self._scoped = (self._current_parameters(), weight, bias)
+
+    def expanded(self) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The weight and bias this call uses: the scope's, or a fresh expansion."""
+        if self._scoped is not None:
+            scoped_params, weight, bias = self._scoped
+            current = self._current_parameters()
+            if all(c is s for c, s in zip(current, scoped_params)):
+                if weight.requires_grad or not torch.is_grad_enabled() or not any(
+                        p is not None and p.requires_grad for p in current):
+                    return weight, bias
+            elif all(_aliases(c, s) for c, s in zip(current, scoped_params)):
+                # Detached aliases swapped in by ``to_module`` (the policy loss's frozen
+                # Q): the same memory, unwritten inside the scope, so the same values.
+                return weight.detach(), None if bias is None else bias.detach()
+        return self.expand()
+
+
+class EquivariantLinear(ScopedExpansion):
     """A G-equivariant linear map (escnn's basis), applied as a plain ``F.linear``.
 
     The weight matrix is a linear function of escnn's basis coefficients (the
-    layer's parameters). Outside an ``expansion_scope`` it is expanded from them
-    at every call, so it always reflects the parameters as they are now, however
-    they were written (optimiser, ``SoftUpdate`` through ``.data``,
-    ``load_state_dict``, ``TensorDict.to_module``).
-
-    Inside an ``expansion_scope`` it is expanded once, at the scope's entry, and
-    reused by every call: that is how the planner (hundreds of network calls per
-    action) and the loss (the horizon unroll) avoid re-expanding. The scope is
-    the explicit refresh point; there is no cache that outlives it. An earlier
-    design cached across calls keyed on the parameters' version counters and
-    was silently stale after writes through ``.data`` (TorchRL's ``SoftUpdate``,
-    fused Adam): the target network never moved.
+    layer's parameters), expanded at every call or once per ``expansion_scope``
+    (``ScopedExpansion``): that is how the planner (hundreds of network calls per
+    action) and the loss (the horizon unroll) avoid re-expanding.
     """
 
     def __init__(self, in_type: enn.FieldType, out_type: enn.FieldType, bias: bool = True,
@@ -91,8 +128,6 @@ class EquivariantLinear(nn.Module):
             # for why they are spread out instead, as nn.Linear's are.
             with torch.no_grad():
                 self.layer.bias.uniform_(-bias_init, bias_init)
-        self._scoped: tuple[tuple[torch.Tensor | None, ...], torch.Tensor,
-                            torch.Tensor | None] | None = None
 
     @property
     def in_type(self) -> enn.FieldType:
@@ -115,28 +150,7 @@ class EquivariantLinear(nn.Module):
         return (self.layer.weights, self.layer.bias)
 
     def expand(self) -> tuple[torch.Tensor, torch.Tensor | None]:
-        """(weight, bias) as plain matrices, freshly expanded from the parameters."""
         return self.layer.expand_parameters()
-
-    def open_scope(self) -> None:
-        """Expand now and reuse the result until ``expansion_scope`` restores the outer one."""
-        weight, bias = self.expand()
-        self._scoped = (self._current_parameters(), weight, bias)
-
-    def expanded(self) -> tuple[torch.Tensor, torch.Tensor | None]:
-        """The weight and bias this call uses: the scope's, or a fresh expansion."""
-        if self._scoped is not None:
-            scoped_params, weight, bias = self._scoped
-            current = self._current_parameters()
-            if all(c is s for c, s in zip(current, scoped_params)):
-                if weight.requires_grad or not torch.is_grad_enabled() or not any(
-                        p is not None and p.requires_grad for p in current):
-                    return weight, bias
-            elif all(_aliases(c, s) for c, s in zip(current, scoped_params)):
-                # Detached aliases swapped in by ``to_module`` (the policy loss's frozen
-                # Q): the same memory, unwritten inside the scope, so the same values.
-                return weight.detach(), None if bias is None else bias.detach()
-        return self.expand()
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         weight, bias = self.expanded()
@@ -164,7 +178,8 @@ def _aliases(a: torch.Tensor | None, b: torch.Tensor | None) -> bool:
 
 @contextlib.contextmanager
 def expansion_scope(*modules: nn.Module) -> Iterator[None]:
-    """Expand every equivariant weight of ``modules`` once, and reuse it until exit.
+    """Expand every ``ScopedExpansion`` of ``modules`` (equivariant weights, tied
+    LayerNorm affines) once, and reuse the result until exit.
 
     The contract: nothing writes the parameters inside the scope. The agent opens
     one around each plan (no gradients) and one around each loss evaluation (with
@@ -173,7 +188,7 @@ def expansion_scope(*modules: nn.Module) -> Iterator[None]:
     and the next scope expands again, so no write path can leave a stale weight.
     A scope inside a scope re-expands; leaving it restores the outer one.
     """
-    layers = [m for module in modules for m in module.modules() if isinstance(m, EquivariantLinear)]
+    layers = [m for module in modules for m in module.modules() if isinstance(m, ScopedExpansion)]
     outer = [layer._scoped for layer in layers]
     try:
         for layer in layers:
@@ -273,10 +288,13 @@ class SplitLinear(nn.Module):
         return torch.cat([weight, rest_weight], dim=1), bias
 
 
-class FieldLayerNorm(nn.Module):
+class FieldLayerNorm(ScopedExpansion):
     """LayerNorm whose scale and shift are shared within each field.
 
-    With all fields of size 1 (a plain layout) this is ``nn.LayerNorm``.
+    With all fields of size 1 (a plain layout) this is ``nn.LayerNorm``. Otherwise
+    the tied scale and shift are gathered to one per channel (``expand``) and
+    applied inside the kernel: half the time of normalising, then gathering,
+    multiplying and adding; once per ``expansion_scope``, not once per call.
     """
 
     def __init__(self, layout: Layout, eps: float = 1e-5) -> None:
@@ -289,15 +307,23 @@ class FieldLayerNorm(nn.Module):
         self.bias = nn.Parameter(torch.zeros(len(sizes)))
         index = torch.repeat_interleave(torch.arange(len(sizes)), torch.tensor(sizes))
         self.register_buffer("field_index", index, persistent=False)
-        self.per_channel = all(size == 1 for size in sizes)  # plain: nothing to gather
+        self.per_channel = all(size == 1 for size in sizes)
+
+    def _current_parameters(self) -> tuple[torch.Tensor | None, ...]:
+        return (self.weight, self.bias)
+
+    def expand(self) -> tuple[torch.Tensor, torch.Tensor | None]:
+        return self.weight[self.field_index], self.bias[self.field_index]
+
+    def open_scope(self) -> None:
+        if not self.per_channel:  # plain layers apply their parameters as they are
+            super().open_scope()
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        # The tied scale and shift gathered to one per channel, applied inside the kernel
-        # (half the time of normalising, then gathering, multiplying and adding).
-        if self.per_channel:
+        if self.per_channel:  # plain: nothing to gather
             return F.layer_norm(x, (self.size,), self.weight, self.bias, self.eps)
-        return F.layer_norm(x, (self.size,), self.weight[self.field_index],
-                            self.bias[self.field_index], self.eps)
+        weight, bias = self.expanded()
+        return F.layer_norm(x, (self.size,), weight, bias, self.eps)
 
 
 def norm_and_activation(layout: Layout, activation_name: str,

@@ -17,7 +17,7 @@ from tensordict import TensorDict
 from torchrl.objectives import SoftUpdate
 
 from agents import NetworkConfig, build_networks
-from agents.layers import EquivariantLinear, expansion_scope
+from agents.layers import EquivariantLinear, ScopedExpansion, expansion_scope
 from agents.loss import LossConfig, TDMPCLoss
 from agents.tdmpc import TDMPCAgent, TDMPCConfig
 from agents.world_model import WorldModel
@@ -206,6 +206,6 @@ def test_scope_restores_the_outer_expansion_and_sees_grad_mode():
         assert all(p.grad is not None for p in net.parameters())
         with expansion_scope(net):
             pass
-        assert all(m._scoped is not None for m in net.modules() if isinstance(m, EquivariantLinear))
-    assert all(m._scoped is None for m in net.modules() if isinstance(m, EquivariantLinear))
+        assert all(m._scoped is not None for m in net.modules() if isinstance(m, ScopedExpansion))
+    assert all(m._scoped is None for m in net.modules() if isinstance(m, ScopedExpansion))
     copy.deepcopy(net)  # no scope state travels
