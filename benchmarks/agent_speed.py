@@ -13,9 +13,12 @@ layers it stands for) and compares its achieved FLOP rate with that of a plain
 matrix product of the planner's batch and width.
 
 Every configuration is measured in a fresh process, so none inherits another's
-warm-up, allocator or thread state. ``--baseline DIR`` also measures the plain
-agent of another checkout (e.g. ``git worktree add /tmp/landed <commit>``) in
-the same run, for "faster than before" ratios.
+warm-up, allocator or thread state, once per round over ``--rounds`` rounds
+(all configurations in turn, so that a change in the machine's load hits all
+alike); each row reports medians, and its ratio to the plain agent per round.
+``--baseline DIR`` also measures the plain agent of another checkout (e.g.
+``git worktree add /tmp/landed <commit>``) in the same run, for "faster than
+before" ratios.
 
     python benchmarks/agent_speed.py [--threads 1] [--preset tdmpc] [--baseline /tmp/landed]
                                      [--only plain D8]
@@ -30,6 +33,7 @@ import platform
 import subprocess
 import sys
 from pathlib import Path
+from statistics import median
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -145,7 +149,8 @@ def main() -> None:
     parser.add_argument("--baseline", type=Path, default=None,
                         help="another checkout whose plain PointMass2D agent to measure alongside")
     parser.add_argument("--rounds", type=int, default=3,
-                        help="baseline and this checkout measured alternately, this many times each")
+                        help="each configuration (and the baseline, alternating with this checkout) "
+                             "measured this many times; medians reported")
     parser.add_argument("--only", nargs="*", default=None,
                         help="measure only the agents whose label contains one of these words")
     args = parser.parse_args()
@@ -153,19 +158,29 @@ def main() -> None:
 
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, torch {torch.__version__}, "
           f"{args.threads} thread(s); agent preset {args.preset}\n")
+    # Every configuration once per round, rounds repeated: a change in the machine's load
+    # hits all of them alike, and each row reports its median over the rounds.
+    selected = [c for c in CONFIGS if c[1] == "plain"  # every ratio's denominator
+                or args.only is None or any(word in c[1] for word in args.only)]
+    runs: dict[tuple[str, str], list[dict[str, float]]] = {(t, lab): [] for t, lab, _ in selected}
+    for _ in range(args.rounds):
+        for task, label, overrides in selected:
+            runs[task, label].append(measure(ROOT, task, overrides, args.threads, args.preset,
+                                             args.repeats))
+    print(f"median of {args.rounds} round(s); 'x plain step' per round in brackets\n")
     print("| task | agent | hidden width | plan (ms) | update (ms) | agent step (ms) | x plain step "
           "| planner GFLOP/s (dense-equivalent) | matmul GFLOP/s, same size |")
     print("|---|---|---|---|---|---|---|---|---|")
-    plain: dict[str, float] = {}
-    for task, label, overrides in CONFIGS:
-        if args.only is not None and not any(word in label for word in args.only):
-            continue
-        r = measure(ROOT, task, overrides, args.threads, args.preset, args.repeats)
-        step = r["plan"] + r["update"]
-        plain.setdefault(task, step)
-        print(f"| {task} | {label} | {r['width']} | {r['plan'] * 1e3:.1f} | {r['update'] * 1e3:.1f} "
-              f"| {step * 1e3:.1f} | {step / plain[task]:.2f} | {r['planner_gflops']:.1f} "
-              f"| {r['matmul_gflops']:.1f} |", flush=True)
+    plain: dict[str, list[float]] = {}
+    for (task, label), rs in runs.items():
+        steps = [r["plan"] + r["update"] for r in rs]
+        plain.setdefault(task, steps)
+        ratios = [a / b for a, b in zip(steps, plain[task])]
+        m = {key: median([r[key] for r in rs]) for key in rs[0]}
+        spread = f" [{', '.join(f'{x:.2f}' for x in ratios)}]" if len(rs) > 1 else ""
+        print(f"| {task} | {label} | {rs[0]['width']} | {m['plan'] * 1e3:.1f} "
+              f"| {m['update'] * 1e3:.1f} | {median(steps) * 1e3:.1f} | {median(ratios):.2f}{spread} "
+              f"| {m['planner_gflops']:.1f} | {m['matmul_gflops']:.1f} |", flush=True)
     if args.baseline:
         # Alternating rounds, so that a change in the machine's load hits both alike;
         # the medians are reported.
