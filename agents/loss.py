@@ -106,7 +106,7 @@ class TDMPCLoss(LossModule):
         predicted = torch.stack(rollout[1:], dim=1)  # d(z_t, a_t)
         q = model.q(latents, action)  # [num_q, batch, horizon, 1]
         reward_pred = model.reward(latents, action)
-        rho = cfg.rho ** torch.arange(horizon, device=obs.device, dtype=obs.dtype)
+        rho = self._rho(horizon, obs)
         consistency = (rho * F.mse_loss(predicted, target_z, reduction="none").mean(-1)).sum(-1)
         reward_loss = (rho * F.mse_loss(reward_pred, reward, reduction="none").squeeze(-1)).sum(-1)
         td_error = q - td_target
@@ -135,5 +135,8 @@ class TDMPCLoss(LossModule):
         frozen_q = TensorDict.from_module(self.model.qs).detach()
         with frozen_q.to_module(self.model.qs):
             q = self.model.q(latents, action).min(dim=0).values.squeeze(-1)
-        rho = self.config.rho ** torch.arange(latents.shape[1], device=latents.device)
-        return -(q.mean(0) * rho).sum()
+        return -(q.mean(0) * self._rho(latents.shape[1], latents)).sum()
+
+    def _rho(self, horizon: int, like: torch.Tensor) -> torch.Tensor:
+        """TD-MPC's per-step weights rho^t, t < horizon, on ``like``'s device and dtype."""
+        return self.config.rho ** torch.arange(horizon, device=like.device, dtype=like.dtype)

@@ -10,7 +10,11 @@ when the ``tensorboard`` package is installed, its ``TensorboardLogger``.
 from __future__ import annotations
 
 import csv
+import datetime
+import importlib.metadata
 import importlib.util
+import platform
+import subprocess
 from pathlib import Path
 
 from torchrl.record.loggers import CSVLogger, Logger, TensorboardLogger
@@ -67,6 +71,40 @@ TRAIN_COLUMNS = ["env_step", "agent_step", "episode", "wall_time", "updates", "l
                  "episode_reward", "steps_per_second"]
 
 
+# One row per start or resume: which code made which steps (a run resumed in another
+# session may run other code; float rounding differs between versions).
+SESSION_COLUMNS = ["env_step", "started", "git_commit", "git_dirty", "torch", "escnn",
+                   "torchrl", "host"]
+_CODE_ROOT = Path(__file__).resolve().parent.parent
+
+
+def code_version() -> dict[str, str]:
+    """The git commit of the code this process imported (``unknown`` outside a git
+    checkout) and whether its tracked sources differ from that commit."""
+
+    def git(*args: str) -> str | None:
+        try:
+            done = subprocess.run(["git", "-C", str(_CODE_ROOT), *args], capture_output=True,
+                                  text=True, timeout=30, check=False)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return done.stdout.strip() if done.returncode == 0 else None
+
+    commit = git("rev-parse", "HEAD")
+    if commit is None:
+        return {"git_commit": "unknown", "git_dirty": "unknown"}
+    changed = git("status", "--porcelain", "--untracked-files=no", "--", "agents",
+                  "geomdp_envs", "configs")
+    return {"git_commit": commit, "git_dirty": "unknown" if changed is None else str(bool(changed))}
+
+
+def _version(package: str) -> str:
+    try:
+        return importlib.metadata.version(package)
+    except importlib.metadata.PackageNotFoundError:
+        return "absent"
+
+
 class RunLog:
     """Writes the run's tables and forwards every value to TorchRL's loggers."""
 
@@ -74,6 +112,7 @@ class RunLog:
         self.run_dir = run_dir
         self.eval = CsvTable(run_dir / "eval.csv", EVAL_COLUMNS)
         self.train = CsvTable(run_dir / "train.csv", TRAIN_COLUMNS)
+        self.sessions = CsvTable(run_dir / "sessions.csv", SESSION_COLUMNS)
         self.loggers: list[Logger] = [CSVLogger(exp_name="torchrl_csv", log_dir=str(run_dir))]
         have_tb = importlib.util.find_spec("tensorboard") is not None
         if tensorboard is True and not have_tb:
@@ -81,6 +120,15 @@ class RunLog:
                              "installed (pip install tensorboard), or use auto/false")
         if tensorboard is True or (tensorboard == "auto" and have_tb):
             self.loggers.append(TensorboardLogger(exp_name="tensorboard", log_dir=str(run_dir)))
+
+    def record_session(self, env_step: int) -> None:
+        """Append who ran this run from ``env_step`` on: code commit, library versions, host.
+        Kept across resumes (not truncated): it is the run's provenance."""
+        self.sessions.append({
+            "env_step": env_step,
+            "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+            **code_version(), "torch": _version("torch"), "escnn": _version("escnn"),
+            "torchrl": _version("torchrl"), "host": platform.node()})
 
     def truncate_after(self, env_step: int) -> int:
         """Drop rows logged after ``env_step`` (-1: all), TorchRL's CSV files included;

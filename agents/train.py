@@ -4,7 +4,8 @@
         train.steps=100000 hydra.run.dir=runs/x
 
 Everything a run writes goes to its run directory: ``config.yaml`` (resolved),
-``eval.csv``, ``train.csv``, TorchRL logger output and ``checkpoint/``.
+``eval.csv``, ``train.csv``, ``sessions.csv`` (the code commit and library versions
+of each start and resume), TorchRL logger output and ``checkpoint/``.
 Starting the same command again continues from the last checkpoint (replay
 buffer included). The loop follows TD-MPC: collect a whole episode with the
 planner (random actions for the first ``train.seed_steps``), then make one
@@ -230,6 +231,7 @@ class Trainer:
             if dropped:
                 print(f"starting {run_dir} over (no checkpoint; dropped {dropped} log rows)")
         check_disk_space(run_dir, self.agent, agent_cfg.replay.capacity, obs_size, action_size)
+        self.log.record_session(self.state["env_step"])
 
     # acting
     def random_action(self) -> torch.Tensor:

@@ -47,6 +47,11 @@ def test_smoke_run_writes_everything(tmp_path):
     assert train[-1]["updates"] == "125" and float(train[-1]["loss_model"]) > 0
     assert 0 < float(train[-1]["target_lag"]) < 1 and train[-1]["q_mean"] != ""
     assert json.loads((tmp_path / "checkpoint/state.json").read_text())["env_step"] == 2000
+    (session,) = rows(tmp_path / "sessions.csv")
+    head = subprocess.run(["git", "-C", str(CONFIG_DIR), "rev-parse", "HEAD"], capture_output=True,
+                          text=True, check=False).stdout.strip()
+    assert session["git_commit"] == (head or "unknown") and session["env_step"] == "0"
+    assert session["git_dirty"] in ("True", "False", "unknown") and session["torch"] != "absent"
 
 
 def test_same_seed_gives_the_same_eval_csv(tmp_path):
@@ -94,6 +99,8 @@ def test_killed_run_resumes_to_the_same_result(tmp_path, uninterrupted, agent, k
     assert finished.returncode == 0, finished.stderr[-2000:]
     for table in ("eval.csv", "train.csv"):
         assert rows(tmp_path / table) == rows(uninterrupted(agent) / table), table
+    sessions = rows(tmp_path / "sessions.csv")  # one row per start, kept across the resume
+    assert len(sessions) == 2 and sessions[0]["env_step"] == "0", sessions
     assert not (tmp_path / "checkpoint.old").exists() and not (tmp_path / "checkpoint.tmp").exists()
 
 
