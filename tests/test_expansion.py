@@ -8,11 +8,15 @@ and without gradients, inside and outside a scope) against a fresh expansion.
 """
 
 import copy
+import itertools
 
 import gymnasium
 import pytest
 import torch
 import torch.nn.functional as F
+from escnn import group as escnn_group
+from escnn import gspaces
+from escnn import nn as enn
 from tensordict import TensorDict
 from torchrl.objectives import SoftUpdate
 
@@ -209,3 +213,37 @@ def test_scope_restores_the_outer_expansion_and_sees_grad_mode():
         assert all(m._scoped is not None for m in net.modules() if isinstance(m, ScopedExpansion))
     assert all(m._scoped is None for m in net.modules() if isinstance(m, ScopedExpansion))
     copy.deepcopy(net)  # no scope state travels
+
+
+GROUPS = {"D8": lambda: escnn_group.dihedral_group(8), "C8": lambda: escnn_group.cyclic_group(8),
+          "octahedral": escnn_group.octa_group, "icosahedral": escnn_group.ico_group,
+          "SO2": lambda: escnn_group.so2_group(3), "O2": lambda: escnn_group.o2_group(3),
+          "SO3": lambda: escnn_group.so3_group(2), "O3": lambda: escnn_group.o3_group(2)}
+
+
+@pytest.mark.parametrize("name", GROUPS)
+def test_expansion_equals_escnns(name):
+    """``EquivariantLinear.expand`` (one GEMM per pair of field types) gives escnn's
+    ``expand_parameters`` matrix, bias and coefficient gradients, for hidden, input and
+    output layers, with the fields of one type adjacent or interleaved with others."""
+    group = GROUPS[name]()
+    space = gspaces.no_base_space(group)
+    hidden = (group.bl_regular_representation(2) if group.continuous
+              else group.regular_representation)
+    vector = next(r for r in group.irreps() if r.size > 1)
+    trivial = group.trivial_representation
+    layouts = [([hidden] * 3, [hidden] * 3), ([vector, trivial, vector, hidden], [hidden] * 3),
+               ([hidden] * 3 + [vector], [hidden] * 2), ([hidden] * 2, [trivial, vector, trivial]),
+               ([vector, hidden, vector], [vector, trivial])]
+    for (ins, outs), bias in itertools.product(layouts, (True, False)):
+        layer = EquivariantLinear(enn.FieldType(space, ins), enn.FieldType(space, outs), bias=bias)
+        with torch.no_grad():
+            layer.layer.weights.normal_()
+        weight, expanded_bias = layer.expand()
+        reference, reference_bias = layer.layer.expand_parameters()
+        torch.testing.assert_close(weight, reference, atol=1e-5, rtol=1e-5)
+        assert (expanded_bias is None) == (reference_bias is None)
+        probe = torch.randn_like(weight)
+        ours = torch.autograd.grad((weight * probe).sum(), layer.layer.weights)[0]
+        theirs = torch.autograd.grad((reference * probe).sum(), layer.layer.weights)[0]
+        torch.testing.assert_close(ours, theirs, atol=1e-4, rtol=1e-4)
