@@ -4,7 +4,8 @@ Why not ``nn.ELU``: on the CPU builds this project runs on (torch 2.14, x86),
 ATen's ``elu`` and ``elu_backward`` are slow and erratic: 47 to 630 us on the
 planner's [268, 128] hidden batch, from one process to the next, where
 ``clamp``, ``exp2`` and arithmetic take a few microseconds each (``exp`` is
-itself 3x slower than ``exp2``). ``ELU`` below computes
+itself 3x slower than ``exp2``, and ``clamp(max=0)`` 2x slower than ``minimum``
+with a zero-dimensional zero: 114 against 59 us on [1280, 512]). ``ELU`` below computes
 ``max(exp2(min(x, 0) log2 e) - 1, x)`` in one new buffer, 27 us there: equal
 to ``x`` exactly where x > 0, and within one float32 ulp of 1 (6e-8, absolute)
 of ``expm1`` elsewhere; its backward reuses the output (``min(y, 0) + 1``).
@@ -23,7 +24,7 @@ def _elu(x: torch.Tensor) -> torch.Tensor:
     # exp(x) - 1 >= x for every x, with exp(min(x, 0)) - 1 = 0 for x > 0: so the maximum
     # of the two is x exactly for x > 0 and exp(x) - 1 otherwise. One new buffer.
     # exp(x) as exp2(x log2 e): the rounded product adds at most |x| e^x 2^-24 < 3e-8.
-    y = x.clamp(max=0).mul_(_LOG2_E).exp2_().sub_(1)
+    y = torch.minimum(x, x.new_zeros(())).mul_(_LOG2_E).exp2_().sub_(1)
     return torch.maximum(y, x, out=y)
 
 
@@ -39,7 +40,7 @@ class _ELUFunction(torch.autograd.Function):
     def backward(ctx: torch.autograd.function.FunctionCtx, grad: torch.Tensor) -> torch.Tensor:
         (y,) = ctx.saved_tensors
         # d/dx elu = 1 for x > 0, exp(x) = y + 1 otherwise: min(y, 0) + 1 covers both.
-        return y.clamp(max=0).add_(1).mul_(grad)
+        return torch.minimum(y, y.new_zeros(())).add_(1).mul_(grad)
 
 
 class ELU(nn.Module):

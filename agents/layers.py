@@ -398,11 +398,18 @@ class FieldLayerNorm(ScopedExpansion):
         index = torch.repeat_interleave(torch.arange(len(sizes)), torch.tensor(sizes))
         self.register_buffer("field_index", index, persistent=False)
         self.per_channel = all(size == 1 for size in sizes)
+        # Fields of one size (hidden layers): repeat each parameter by a broadcast, whose
+        # backward is a sum, not the gather's scatter-add.
+        self.common_size = sizes[0] if len(set(sizes)) == 1 else None
 
     def _current_parameters(self) -> tuple[torch.Tensor | None, ...]:
         return (self.weight, self.bias)
 
     def expand(self) -> tuple[torch.Tensor, torch.Tensor | None]:
+        if self.common_size is not None:
+            n, size = len(self.weight), self.common_size
+            return (self.weight[:, None].expand(n, size).reshape(-1),
+                    self.bias[:, None].expand(n, size).reshape(-1))
         return self.weight[self.field_index], self.bias[self.field_index]
 
     def open_scope(self) -> None:

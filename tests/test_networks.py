@@ -184,6 +184,26 @@ def test_field_layer_norm_is_layer_norm_on_plain_layouts():
     torch.testing.assert_close(ours(x), ref(x))
 
 
+@pytest.mark.parametrize("sizes", [[16] * 4, [1, 16, 1, 16]])
+def test_field_layer_norm_ties_scale_and_shift_within_each_field(sizes):
+    """Each field's scale and shift repeated over its channels (a broadcast when all
+    fields have one size, a gather otherwise), with the gradients summed per field."""
+    space = make_group("D8").gspace
+    reps = {1: space.trivial_repr, 16: space.regular_repr}
+    norm = FieldLayerNorm(space.type(*[reps[n] for n in sizes]))
+    with torch.no_grad():
+        norm.weight.normal_()
+        norm.bias.normal_()
+    weight, bias = norm.expand()
+    index = torch.repeat_interleave(torch.arange(len(sizes)), torch.tensor(sizes))
+    assert torch.equal(weight, norm.weight[index]) and torch.equal(bias, norm.bias[index])
+    probe = torch.randn(sum(sizes))
+    (weight * probe + bias * probe).sum().backward()
+    summed = torch.zeros(len(sizes)).index_add_(0, index, probe)
+    torch.testing.assert_close(norm.weight.grad, summed)
+    torch.testing.assert_close(norm.bias.grad, summed)
+
+
 @pytest.mark.parametrize("group_name, task", [("D8", "pointmass2d"), ("icosahedral", "pointmass3d")])
 def test_policy_squash_keeps_vectors_in_the_unit_ball_and_is_equivariant(group_name, task):
     sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
