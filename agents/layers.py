@@ -63,7 +63,8 @@ class ScopedExpansion(nn.Module):
 
     Outside an ``expansion_scope`` the map runs at every call, so the result always
     reflects the parameters as they are now, however they were written (optimiser,
-    ``SoftUpdate`` through ``.data``, ``load_state_dict``, ``TensorDict.to_module``).
+    ``SoftUpdate`` through ``.data``, ``load_state_dict``, ``TensorDict.to_module``,
+    ``detached_parameters``).
     Inside one it runs once, at the scope's entry, and every call reuses it: the
     scope is the explicit refresh point; nothing outlives it. An earlier design
     cached across calls keyed on the parameters' version counters and was
@@ -98,8 +99,9 @@ class ScopedExpansion(nn.Module):
                         p is not None and p.requires_grad for p in current):
                     return weight, bias
             elif all(_aliases(c, s) for c, s in zip(current, scoped_params)):
-                # Detached aliases swapped in by ``to_module`` (the policy loss's frozen
-                # Q): the same memory, unwritten inside the scope, so the same values.
+                # Detached aliases swapped in by ``detached_parameters`` or ``to_module``
+                # (the policy loss's frozen Q): the same memory, unwritten inside the
+                # scope, so the same values.
                 return weight.detach(), None if bias is None else bias.detach()
         return self.expand()
 
@@ -287,6 +289,35 @@ def expansion_scope(*modules: nn.Module) -> Iterator[None]:
     finally:
         for layer, saved in zip(layers, outer):
             layer._scoped = saved
+
+
+ParameterSlots = list[tuple[nn.Module, str]]
+
+
+def parameter_slots(module: nn.Module) -> ParameterSlots:
+    """Where each parameter of ``module`` lives, as (owning module, attribute name): the
+    network's structure, fixed once it is built, so it can be listed once (walking an
+    escnn network's modules costs ~0.8 ms); the parameters are read at each use."""
+    return [(owner, name) for owner in module.modules()
+            for name, p in owner._parameters.items() if p is not None]
+
+
+@contextlib.contextmanager
+def detached_parameters(slots: ParameterSlots) -> Iterator[None]:
+    """Every parameter in ``slots`` replaced by a detached alias (same memory) until exit:
+    calls inside compute with the current values and send no gradient to them (the
+    policy loss's frozen Q). Inside an ``expansion_scope`` the layers recognise the
+    aliases and reuse the scope's expansion, detached (``ScopedExpansion.expanded``).
+    What ``TensorDict.from_module(m).detach().to_module(m)`` does, for parameters only
+    and without walking the modules: 12 us against 2.6 ms for the D8 twin Q."""
+    saved = [owner._parameters[name] for owner, name in slots]
+    try:
+        for (owner, name), p in zip(slots, saved):
+            owner._parameters[name] = p.detach()
+        yield
+    finally:
+        for (owner, name), p in zip(slots, saved):
+            owner._parameters[name] = p
 
 
 LINEAR_KINDS = ("dense", "fourier")

@@ -27,7 +27,7 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictParams
 from torchrl.objectives import LossModule
 
-from agents.layers import expansion_scope
+from agents.layers import detached_parameters, expansion_scope, parameter_slots
 from agents.world_model import WorldModel
 
 
@@ -71,6 +71,7 @@ class TDMPCLoss(LossModule):
         self.target_model_params = TensorDictParams(
             TensorDict.from_module(self.target_model), no_convert=True)
         self._has_update_associated["model"] = False  # until SoftUpdate registers itself
+        self._q_slots = parameter_slots(model.qs)  # frozen in the policy loss
 
     def forward(self, batch: TensorDictBase) -> TensorDict:
         # One expansion of every equivariant weight of both models per call: the online
@@ -132,8 +133,7 @@ class TDMPCLoss(LossModule):
         noise = torch.randn(*latents.shape[:-1], self.model.action_dim, dtype=latents.dtype,
                             device=latents.device)
         action = self.model.pi(latents, self.config.policy_noise, noise)
-        frozen_q = TensorDict.from_module(self.model.qs).detach()
-        with frozen_q.to_module(self.model.qs):
+        with detached_parameters(self._q_slots):
             q = self.model.q(latents, action).min(dim=0).values.squeeze(-1)
         return -(q.mean(0) * self._rho(latents.shape[1], latents)).sum()
 

@@ -21,7 +21,13 @@ from tensordict import TensorDict
 from torchrl.objectives import SoftUpdate
 
 from agents import NetworkConfig, build_networks
-from agents.layers import EquivariantLinear, ScopedExpansion, expansion_scope
+from agents.layers import (
+    EquivariantLinear,
+    ScopedExpansion,
+    detached_parameters,
+    expansion_scope,
+    parameter_slots,
+)
 from agents.loss import LossConfig, TDMPCLoss
 from agents.tdmpc import TDMPCAgent, TDMPCConfig
 from agents.world_model import WorldModel
@@ -247,3 +253,32 @@ def test_expansion_equals_escnns(name):
         ours = torch.autograd.grad((weight * probe).sum(), layer.layer.weights)[0]
         theirs = torch.autograd.grad((reference * probe).sum(), layer.layer.weights)[0]
         torch.testing.assert_close(ours, theirs, atol=1e-4, rtol=1e-4)
+
+
+@pytest.mark.parametrize("group, layers", [(None, "dense"), ("D8", "dense"), ("D8", "fourier"),
+                                           ("SO2", "dense")])
+def test_detached_parameters_freeze_every_layer_kind(group, layers):
+    """The policy loss's frozen Q: inside ``detached_parameters`` (and a scope) a network
+    computes its usual values and sends gradients to its input only, whatever its layers
+    (nn.Linear, EquivariantLinear, FourierLinear, FieldLayerNorm, SpectralLayerNorm);
+    on exit its own Parameter objects are back and gradients reach them again."""
+    torch.manual_seed(0)
+    config = NetworkConfig(group=group, layers=layers, allow_approximate=True, **SMALL)
+    net = build_networks(config, pointmass2d()).qs[0]
+    with torch.no_grad():
+        for p in net.parameters():  # the output layer starts at zero
+            p.add_(0.1 * torch.randn_like(p))
+    params = list(net.parameters())
+    x = torch.randn(16, net.in_layout if isinstance(net.in_layout, int) else net.in_layout.size)
+    with expansion_scope(net):
+        expected = net(x)
+        with detached_parameters(parameter_slots(net)):
+            frozen_x = x.clone().requires_grad_()
+            y = net(frozen_x)
+            y.sum().backward()
+    torch.testing.assert_close(y.detach(), expected.detach())
+    assert all(p.grad is None for p in params)
+    assert frozen_x.grad is not None and frozen_x.grad.abs().max() > 0
+    assert all(a is b for a, b in zip(net.parameters(), params))
+    net(x).sum().backward()
+    assert all(p.grad is not None for p in params)
