@@ -171,10 +171,11 @@ class TDMPCAgent:
         self.policy_optimizer.zero_grad(set_to_none=True)
         (losses["loss_model"] + losses["loss_pi"]).backward()
         clip = self.config.grad_clip_norm
-        model_grad = torch.nn.utils.clip_grad_norm_(
-            [p for g in self.model_optimizer.param_groups for p in g["params"]], clip, foreach=True)
-        policy_grad = torch.nn.utils.clip_grad_norm_(self.model.policy.parameters(), clip,
-                                                     foreach=True)
+        # The optimisers' parameter lists, not ``Module.parameters()``: walking an escnn
+        # network's modules is slow (``agents.layers.submodules``).
+        model_grad, policy_grad = (torch.nn.utils.clip_grad_norm_(
+            [p for g in optimizer.param_groups for p in g["params"]], clip, foreach=True)
+            for optimizer in (self.model_optimizer, self.policy_optimizer))
         self.model_optimizer.step()
         self.policy_optimizer.step()
         self.updates += 1

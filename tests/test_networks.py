@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from agents import NetworkConfig, build_networks, group_for_task, make_group, squash
-from agents.layers import EquivariantLinear, FieldLayerNorm
+from agents.layers import EquivariantLinear, FieldLayerNorm, submodules
 from agents.networks import project
 from geomdp_envs import groups
 
@@ -339,3 +339,15 @@ def test_irrep_basis_layers_give_the_same_networks_as_dense_ones(group_name, tas
     assert counts["dense"] == counts["fourier"]
     assert NetworkConfig(width_strategy="sqrt").linear_kind() == "fourier"
     assert NetworkConfig(width_strategy="linear").linear_kind() == "dense"
+
+
+@pytest.mark.parametrize("group", [None, "D8", "icosahedral", "SO3"])
+def test_submodules_walks_like_modules(group):
+    """``submodules`` (the agent's walk, without hashing escnn's modules) visits exactly
+    ``Module.modules()``, in its order, shared modules once."""
+    sym = declaration(*TASK_3D) if group in ("icosahedral", "SO3") else declaration(
+        *TASKS_2D["pointmass2d"])
+    nets = build_networks(NetworkConfig(group=group, width_strategy="linear", **SMALL), sym)
+    shared = torch.nn.ModuleList([nets.encoder, nets.qs, nets.encoder])
+    for module in [*nets.modules().values(), shared]:
+        assert [id(m) for m in submodules(module)] == [id(m) for m in module.modules()]
