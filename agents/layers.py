@@ -139,13 +139,13 @@ class EquivariantLinear(ScopedExpansion):
             with torch.no_grad():
                 self.layer.bias.uniform_(-bias_init, bias_init)
         pairs = _field_type_pairs(self.layer._basisexpansion)
-        self._pairs = [pair for pair, _ in pairs]
-        for k, (pair, basis) in enumerate(pairs):
+        self._pairs = [pair for pair, _, _ in pairs]
+        for k, (_, basis, indices) in enumerate(pairs):
             # Buffers (so they follow .to()), not persistent: rebuilt with the network.
             self.register_buffer(f"_basis{k}", basis, persistent=False)
-            for side in ("rows", "cols"):
-                if isinstance(getattr(pair, side), torch.Tensor):
-                    self.register_buffer(f"_{side}{k}", getattr(pair, side), persistent=False)
+            if indices is not None:
+                self.register_buffer(f"_rows{k}", indices[0][:, None], persistent=False)
+                self.register_buffer(f"_cols{k}", indices[1][None, :], persistent=False)
         self._whole = (len(self._pairs) == 1 and self._pairs[0].rows == slice(0, out_type.size)
                        and self._pairs[0].cols == slice(0, in_type.size))
 
@@ -183,14 +183,10 @@ class EquivariantLinear(ScopedExpansion):
         else:
             weight = coefficients.new_zeros(self.out_type.size, self.in_type.size)
             for k, (pair, block) in enumerate(zip(self._pairs, blocks)):
-                rows = getattr(self, f"_rows{k}", pair.rows)  # the buffer, if indices
-                cols = getattr(self, f"_cols{k}", pair.cols)
-                if isinstance(rows, slice) and isinstance(cols, slice):
-                    weight[rows, cols] = block
-                else:
-                    rows, cols = (torch.arange(i.start, i.stop, device=weight.device)
-                                  if isinstance(i, slice) else i for i in (rows, cols))
-                    weight = weight.index_put((rows[:, None], cols[None, :]), block)
+                if pair.rows is not None:
+                    weight[pair.rows, pair.cols] = block
+                else:  # fields of this type interleaved with others: channel indices
+                    weight[getattr(self, f"_rows{k}"), getattr(self, f"_cols{k}")] = block
         bias = None
         if self.layer.bias is not None:
             bias = self.layer.bias_expansion @ self.layer.bias
@@ -216,21 +212,23 @@ class EquivariantLinear(ScopedExpansion):
 class _FieldTypePair:
     """One (input representation, output representation) pair of an escnn ``Linear``:
     where its coefficients sit in the flat parameter vector, and where its blocks go
-    in the weight (a slice when the fields of each type are adjacent, else channel
-    indices)."""
+    in the weight: ``rows``/``cols`` slices when the fields of each type are adjacent,
+    else None (the layer keeps channel indices in buffers)."""
 
     weights: slice
     n_out: int
     n_in: int
     out_size: int
     in_size: int
-    rows: slice | torch.Tensor
-    cols: slice | torch.Tensor
+    rows: slice | None
+    cols: slice | None
 
 
-def _field_type_pairs(expansion: nn.Module) -> list[tuple[_FieldTypePair, torch.Tensor]]:
+def _field_type_pairs(expansion: nn.Module) -> list[
+        tuple[_FieldTypePair, torch.Tensor, tuple[torch.Tensor, torch.Tensor] | None]]:
     """The pairs of an escnn ``BlocksBasisExpansion`` (the layout of its ``forward``),
-    each with its sampled basis as a [basis, out_size x in_size] matrix."""
+    each with its sampled basis as a [basis, out_size x in_size] matrix and, when its
+    fields are not adjacent, the channel indices of its rows and columns."""
     if expansion.S != 1:
         raise ValueError(f"expected a 0-dimensional base space (one sample), got {expansion.S}")
 
@@ -241,10 +239,8 @@ def _field_type_pairs(expansion: nn.Module) -> list[tuple[_FieldTypePair, torch.
             start += rep.size
         return out
 
-    def placement(positions: list[int]) -> slice | torch.Tensor:
-        if positions == list(range(positions[0], positions[-1] + 1)):
-            return slice(positions[0], positions[-1] + 1)
-        return torch.tensor(positions)
+    def adjacent(positions: list[int]) -> bool:
+        return positions == list(range(positions[0], positions[-1] + 1))
 
     out_channels, in_channels = channels(expansion._out_reprs), channels(expansion._in_reprs)
     pairs = []
@@ -252,11 +248,15 @@ def _field_type_pairs(expansion: nn.Module) -> list[tuple[_FieldTypePair, torch.
         block = getattr(expansion, f"block_expansion_{expansion._escape_pair((in_name, out_name))}")
         basis = block.sampled_basis  # [basis, out_size, in_size, 1]
         start, stop = expansion._weights_ranges[(in_name, out_name)]
+        rows, cols = out_channels[out_name], in_channels[in_name]
+        sliced = adjacent(rows) and adjacent(cols)
         pairs.append((_FieldTypePair(
             weights=slice(start, stop), n_out=expansion._out_count[out_name],
             n_in=expansion._in_count[in_name], out_size=basis.shape[1], in_size=basis.shape[2],
-            rows=placement(out_channels[out_name]), cols=placement(in_channels[in_name])),
-            basis.reshape(basis.shape[0], -1).clone()))
+            rows=slice(rows[0], rows[-1] + 1) if sliced else None,
+            cols=slice(cols[0], cols[-1] + 1) if sliced else None),
+            basis.reshape(basis.shape[0], -1).clone(),
+            None if sliced else (torch.tensor(rows), torch.tensor(cols))))
     return pairs
 
 
@@ -445,10 +445,10 @@ class FieldLayerNorm(ScopedExpansion):
         self.bias = nn.Parameter(torch.zeros(len(sizes)))
         index = torch.repeat_interleave(torch.arange(len(sizes)), torch.tensor(sizes))
         self.register_buffer("field_index", index, persistent=False)
-        self.per_channel = all(size == 1 for size in sizes)
         # Fields of one size (hidden layers): repeat each parameter by a broadcast, whose
-        # backward is a sum, not the gather's scatter-add.
+        # backward is a sum, not the gather's scatter-add. Size 1: a plain LayerNorm.
         self.common_size = sizes[0] if len(set(sizes)) == 1 else None
+        self.per_channel = self.common_size == 1
 
     def _current_parameters(self) -> tuple[torch.Tensor | None, ...]:
         return (self.weight, self.bias)
