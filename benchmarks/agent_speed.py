@@ -10,7 +10,10 @@ basis (``FourierLinear``: the default), the continuous groups' agents (SO2, O2
 beside D8; SO3, O3 beside icosahedral; default band limit and grid), and prints
 ratios to the plain agent on the same task. It also counts the planner's FLOPs (as the dense expanded
 layers it stands for) and compares its achieved FLOP rate with that of a plain
-matrix product of the planner's batch and width.
+matrix product of the planner's batch and width; and it counts the arithmetic an
+agent step actually does (matmul-type ops, irrep-basis transforms included, by
+torch's FLOP formulas), so that a ratio to plain splits into "more arithmetic"
+and "arithmetic done less efficiently".
 
 Every configuration is measured in a fresh process, so none inherits another's
 warm-up, allocator or thread state, once per round over ``--rounds`` rounds
@@ -124,7 +127,25 @@ hidden = next(x for x in agent.networks.dynamics.modules() if hasattr(x, "out_ty
 width = hidden.out_type.size if hasattr(hidden, "out_type") else hidden.out_features
 a, b = torch.randn(n, width), torch.randn(width, width)
 matmul = timed(lambda: a @ b)
+# The arithmetic actually done (matmul-type ops, by torch's own FLOP formulas) in one
+# plan and one update, untimed. A dispatch mode of our own: torch's FlopCounterMode
+# also tracks modules, and its tracker tests TorchRL's modules for truth, which raises.
+from torch.utils._python_dispatch import TorchDispatchMode
+from torch.utils.flop_counter import flop_registry
+class CountFlops(TorchDispatchMode):
+    total = 0
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        kwargs = kwargs or {}
+        out = func(*args, **kwargs)
+        formula = flop_registry.get(func._overloadpacket)
+        if formula is not None:
+            kwargs = {k: v for k, v in kwargs.items() if k != "out"}
+            CountFlops.total += formula(*args, **kwargs, out_val=out)
+        return out
+with CountFlops():
+    act(); learn()
 print(json.dumps({"plan": plan, "update": update, "width": width,
+                  "step_gflop": CountFlops.total / 1e9,
                   "planner_gflops": flops / plan / 1e9,
                   "matmul_gflops": 2 * n * width * width / matmul / 1e9}))
 """
@@ -169,17 +190,20 @@ def main() -> None:
                                              args.repeats))
     print(f"median of {args.rounds} round(s); 'x plain step' per round in brackets\n")
     print("| task | agent | hidden width | plan (ms) | update (ms) | agent step (ms) | x plain step "
+          "| GFLOP per step (x plain) | achieved GFLOP/s "
           "| planner GFLOP/s (dense-equivalent) | matmul GFLOP/s, same size |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    plain: dict[str, list[float]] = {}
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    plain: dict[str, tuple[list[float], float]] = {}
     for (task, label), rs in runs.items():
         steps = [r["plan"] + r["update"] for r in rs]
-        plain.setdefault(task, steps)
-        ratios = [a / b for a, b in zip(steps, plain[task])]
+        plain.setdefault(task, (steps, rs[0]["step_gflop"]))
+        ratios = [a / b for a, b in zip(steps, plain[task][0])]
         m = {key: median([r[key] for r in rs]) for key in rs[0]}
         spread = f" [{', '.join(f'{x:.2f}' for x in ratios)}]" if len(rs) > 1 else ""
         print(f"| {task} | {label} | {rs[0]['width']} | {m['plan'] * 1e3:.1f} "
               f"| {m['update'] * 1e3:.1f} | {median(steps) * 1e3:.1f} | {median(ratios):.2f}{spread} "
+              f"| {m['step_gflop']:.2f} ({m['step_gflop'] / plain[task][1]:.1f}) "
+              f"| {m['step_gflop'] / median(steps):.1f} "
               f"| {m['planner_gflops']:.1f} | {m['matmul_gflops']:.1f} |", flush=True)
     if args.baseline:
         # Alternating rounds, so that a change in the machine's load hits both alike;
