@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -153,6 +154,12 @@ def plot(groups: dict[str, list[Run]], out: Path, title: str,
     plt.close(fig)
 
 
+def default_title(paths: list[Path]) -> str:
+    """The folder the runs share (e.g. ``results/pointmass2d_cpu`` for ``.../{plain,D8}/seed1``),
+    not the first path's name, which for run directories is just ``seed1``."""
+    return Path(os.path.commonpath([p.resolve() for p in paths])).name
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("paths", nargs="+", type=Path, help="directories holding run directories")
@@ -179,7 +186,7 @@ def main(argv: list[str] | None = None) -> None:
         value, _, name = ref.partition(":")
         references.append((float(value), name or "reference"))
     if args.out:
-        plot(groups, args.out, args.title or args.paths[0].name, references)
+        plot(groups, args.out, args.title or default_title(args.paths), references)
     text = table(groups, args.threshold)
     print(text)
     if args.markdown:

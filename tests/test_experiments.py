@@ -73,6 +73,12 @@ def test_plot_handles_unequal_and_unfinished_runs(tmp_path, capsys):
     assert set(plot.group_runs(found, ("agent.layers",))) == {"group=none", "group=D8"}
 
 
+def test_plot_title_defaults_to_the_folder_the_runs_share(tmp_path):
+    runs = [tmp_path / "sweep" / agent / "seed1" for agent in ("plain", "D8")]
+    assert plot.default_title(runs) == "sweep"
+    assert plot.default_title([tmp_path / "sweep"]) == "sweep"
+
+
 def test_plot_without_runs_is_a_clear_error(tmp_path):
     out = subprocess.run([sys.executable, "-m", "agents.plot", str(tmp_path)],
                          capture_output=True, text=True)
