@@ -155,8 +155,9 @@ def plot(groups: dict[str, list[Run]], out: Path, title: str,
 
 
 def default_title(paths: list[Path]) -> str:
-    """The folder the runs share (e.g. ``results/pointmass2d_cpu`` for ``.../{plain,D8}/seed1``),
-    not the first path's name, which for run directories is just ``seed1``."""
+    """The name of the folder the runs share (``pointmass2d_cpu`` for
+    ``results/pointmass2d_cpu/{plain,D8}/seed1``), not the first path's name, which for
+    run directories is just ``seed1``."""
     return Path(os.path.commonpath([p.resolve() for p in paths])).name
 
 
