@@ -1,0 +1,455 @@
+"""A run queue that loses no compute to interruptions.
+
+Runs a list of ``geomdp-train`` jobs from one pinned commit (a ``git worktree`` of
+it), at most ``--parallel`` at a time with one torch thread each, before a deadline:
+
+- a run starts only if its expected wall time fits before the deadline (expected from
+  the finished runs of its group -- the folder above its seed folder -- or from
+  ``--estimate``);
+- at the deadline, runs still going get SIGTERM: they stop at a safe point with their
+  last checkpoint, and the next call of the same command resumes them on a machine
+  that still has the checkpoints (a run that must start over says so in its
+  ``stdout.log``);
+- each finished run's logs (never its checkpoints) are copied into the checkout's
+  ``results/`` and committed at once, after checking that every session of the run
+  used the pinned commit with no local changes (``sessions.csv``).
+
+A plan has one run per line, ``<results dir> <env steps> <override>...``; ``#`` starts
+a comment. The same plan given again skips finished runs and resumes the others::
+
+    python benchmarks/run_queue.py benchmarks/plans/headline.txt --commit 9623621 \\
+        --deadline 20:45 --estimate 'results/reacher_hard_cpu/*=45'
+
+``--dry-run`` prints what would start now, and touches nothing.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime as dt
+import fnmatch
+import json
+import os
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+LOG_FILES_SKIPPED = ("checkpoint", "checkpoint.tmp", "checkpoint.old", ".geomdp-write-test",
+                     "run_queue.pid")
+PID_FILE = "run_queue.pid"  # the trainer's process id while a queue runs it
+STARTUP_MINUTES = 1.0  # building the agent and the first evaluation's set-up, per start
+
+
+class PlanError(ValueError):
+    """A plan or command line the queue cannot run."""
+
+
+@dataclass
+class Run:
+    """One line of a plan: where its logs go, how long it trains, its options."""
+
+    dest: str                      # path relative to the checkout, e.g. results/x/D8/seed1
+    steps: int
+    overrides: list[str]
+    work: Path = field(default=Path())  # where it runs: the same path inside the worktree
+
+    @property
+    def group(self) -> str:
+        return str(Path(self.dest).parent)
+
+    def argv(self, python: str, module: str) -> list[str]:
+        return [python, "-m", module, *self.overrides, f"train.steps={self.steps}",
+                "train.progress=false", f"hydra.run.dir={self.work}"]
+
+
+def read_plan(text: str) -> list[Run]:
+    runs, seen = [], set()
+    for number, line in enumerate(text.splitlines(), 1):
+        words = shlex.split(line, comments=True)
+        if not words:
+            continue
+        if len(words) < 2 or not words[1].isdigit():
+            raise PlanError(f"plan line {number}: expected '<results dir> <env steps> "
+                            f"<override>...', got {line.strip()!r}")
+        dest = os.path.normpath(words[0])
+        if dest.startswith("..") or os.path.isabs(dest):
+            raise PlanError(f"plan line {number}: {words[0]!r} must be a path inside the checkout")
+        if dest in seen:
+            raise PlanError(f"plan line {number}: {dest} is listed twice")
+        seen.add(dest)
+        runs.append(Run(dest, int(words[1]), words[2:]))
+    return runs
+
+
+# --- what the file system says about a run ---------------------------------------------
+def last_row(path: Path) -> dict[str, str] | None:
+    try:
+        with path.open() as f:
+            rows = list(csv.DictReader(f))
+    except OSError:
+        return None
+    return rows[-1] if rows else None
+
+
+def logged_step(run_dir: Path) -> int:
+    """The last evaluated env step in a run directory (-1: none)."""
+    row = last_row(run_dir / "eval.csv")
+    return int(row["env_step"]) if row else -1
+
+
+def checkpoint_step(run_dir: Path) -> int | None:
+    """The env step a restart resumes from (None: no checkpoint)."""
+    for name in ("checkpoint", "checkpoint.old"):
+        path = run_dir / name / "state.json"
+        if path.exists():
+            try:
+                return int(json.loads(path.read_text())["env_step"])
+            except (ValueError, KeyError):
+                return None
+    return None
+
+
+def running_pid(run_dir: Path) -> int | None:
+    """The process a queue started on this run directory, if it is still alive."""
+    try:
+        pid = int((run_dir / PID_FILE).read_text())
+        os.kill(pid, 0)
+    except (OSError, ValueError):
+        return None
+    return pid
+
+
+def wall_minutes(run_dir: Path) -> float | None:
+    """A finished run's training wall time (evaluations included), from its logs."""
+    times = [float(row["wall_time"]) for name in ("eval.csv", "train.csv")
+             if (row := last_row(run_dir / name)) and row.get("wall_time")]
+    return max(times) / 60 if times else None
+
+
+def finished(run: Run, root: Path) -> bool:
+    return logged_step(root / run.dest) >= run.steps
+
+
+# --- expected wall time -----------------------------------------------------------------
+def parse_estimates(items: list[str]) -> list[tuple[str, float]]:
+    out = []
+    for item in items:
+        pattern, _, minutes = item.rpartition("=")
+        try:
+            out.append((pattern, float(minutes)))
+        except ValueError:
+            raise PlanError(f"--estimate {item!r}: expected PATTERN=MINUTES, e.g. "
+                            "'results/reacher_hard_cpu/*=45'") from None
+    return out
+
+
+def expected_minutes(run: Run, runs: list[Run], results: Path,
+                     estimates: list[tuple[str, float]], default: float) -> float:
+    """Minutes a fresh start of ``run`` takes: the mean over its group's finished runs of
+    the same length, else the first matching ``--estimate``, else ``default``."""
+    measured = [m for other in runs
+                if other.group == run.group and other.steps == run.steps and finished(other, results)
+                and (m := wall_minutes(results / other.dest)) is not None]
+    if measured:
+        return sum(measured) / len(measured) + STARTUP_MINUTES
+    for pattern, minutes in estimates:
+        if fnmatch.fnmatch(run.dest, pattern) or fnmatch.fnmatch(run.group, pattern):
+            return minutes
+    return default
+
+
+def remaining_minutes(run: Run, full_minutes: float) -> float:
+    done = checkpoint_step(run.work) or 0
+    return STARTUP_MINUTES + (full_minutes - STARTUP_MINUTES) * max(0.0, 1 - done / run.steps)
+
+
+# --- provenance and results ----------------------------------------------------------------
+def session_problems(run_dir: Path, commit: str) -> list[str]:
+    """Why the run's sessions do not all come from the pinned, clean commit (empty: they do)."""
+    try:
+        with (run_dir / "sessions.csv").open() as f:
+            rows = list(csv.DictReader(f))
+    except OSError:
+        return ["no sessions.csv"]
+    problems = [f"session at env step {r['env_step']} ran commit {r['git_commit'][:10]}"
+                for r in rows if not r["git_commit"].startswith(commit)]
+    problems += [f"session at env step {r['env_step']} ran with local changes"
+                 for r in rows if r["git_dirty"] != "False"]
+    return problems or ([] if rows else ["sessions.csv is empty"])
+
+
+def copy_logs(src: Path, dest: Path) -> None:
+    """The run's logs, without its checkpoints, replace ``dest``."""
+    if dest.exists():
+        shutil.rmtree(dest)
+    shutil.copytree(src, dest, ignore=shutil.ignore_patterns(*LOG_FILES_SKIPPED))
+
+
+def git(repo: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """git in ``repo``, retried while another git process holds the index lock."""
+    for _ in range(30):
+        done = subprocess.run(["git", "-C", str(repo), *args], capture_output=True, text=True)
+        if done.returncode == 0 or "index.lock" not in done.stderr:
+            return done
+        time.sleep(2)
+    return done
+
+
+def commit_results(repo: Path, dest: str, message: str) -> str:
+    """Commit exactly ``dest`` (other staged or unstaged work in the checkout stays as it is)."""
+    for args in (("add", "--", dest), ("commit", "-q", "-m", message, "--only", "--", dest)):
+        done = git(repo, *args)
+        if done.returncode:
+            return f"git {args[0]} failed: {done.stderr.strip() or done.stdout.strip()}"
+    return "committed " + git(repo, "rev-parse", "--short", "HEAD").stdout.strip()
+
+
+def pinned_worktree(repo: Path, commit: str, path: Path | None) -> tuple[str, Path]:
+    """The full commit id and a clean worktree of it (made if missing)."""
+    done = git(repo, "rev-parse", "--verify", f"{commit}^{{commit}}")
+    if done.returncode:
+        raise PlanError(f"--commit {commit}: not a commit of {repo}")
+    full = done.stdout.strip()
+    path = path or repo.parent / f"queue-{full[:7]}"
+    if not path.exists():
+        done = git(repo, "worktree", "add", "--detach", str(path), full)
+        if done.returncode:
+            raise PlanError(f"cannot make a worktree at {path}: {done.stderr.strip()}")
+    head = git(path, "rev-parse", "HEAD").stdout.strip()
+    if head != full:
+        raise PlanError(f"{path} is at {head[:10]}, not the pinned {full[:10]}: give another "
+                        "--worktree, or remove it with 'git worktree remove'")
+    if git(path, "status", "--porcelain", "--untracked-files=no").stdout.strip():
+        raise PlanError(f"{path} has local changes: runs from it would not be from {full[:10]}")
+    return full, path
+
+
+def parse_deadline(text: str, now: dt.datetime) -> dt.datetime:
+    """``HH:MM`` (today, or tomorrow if already past), ``+90m``/``+2h``, or ISO 8601."""
+    try:
+        if text.startswith("+"):
+            value, unit = float(text[1:-1]), text[-1]
+            return now + dt.timedelta(minutes=value * {"m": 1, "h": 60}[unit])
+        if len(text) <= 5 and ":" in text:
+            hour, minute = map(int, text.split(":"))
+            at = now.replace(hour=hour, minute=minute, second=0, microsecond=0)
+            return at if at > now else at + dt.timedelta(days=1)
+        return dt.datetime.fromisoformat(text)
+    except (ValueError, KeyError):
+        raise PlanError(f"--deadline {text!r}: expected HH:MM, +90m, +2h or an ISO time") from None
+
+
+def _raise_interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+# --- the queue ------------------------------------------------------------------------------
+def say(text: str) -> None:
+    print(f"{dt.datetime.now():%H:%M:%S} {text}", flush=True)
+
+
+class Queue:
+    def __init__(self, runs: list[Run], repo: Path, commit: str, worktree: Path,
+                 deadline: dt.datetime, parallel: int = 2, estimates: list[tuple[str, float]] = (),
+                 default_minutes: float = 60.0, python: str = sys.executable,
+                 module: str = "agents.train", commit_results: bool = True,
+                 poll_seconds: float = 10.0, stop_grace_seconds: float = 120.0) -> None:
+        self.runs, self.repo, self.commit, self.worktree = runs, repo, commit, worktree
+        self.deadline, self.parallel = deadline, parallel
+        self.estimates, self.default_minutes = list(estimates), default_minutes
+        self.python, self.module, self.commit_results = python, module, commit_results
+        self.poll_seconds, self.stop_grace_seconds = poll_seconds, stop_grace_seconds
+        for run in runs:
+            run.work = worktree / run.dest
+        self.running: dict[str, tuple[Run, subprocess.Popen, dt.datetime]] = {}
+        self.failed: set[str] = set()
+
+    def minutes_left(self, now: dt.datetime) -> float:
+        return (self.deadline - now).total_seconds() / 60
+
+    def remaining(self, run: Run) -> float:
+        full = expected_minutes(run, self.runs, self.repo, self.estimates, self.default_minutes)
+        return remaining_minutes(run, full)
+
+    def pending(self) -> list[Run]:
+        return [r for r in self.runs if r.dest not in self.running and r.dest not in self.failed
+                and not finished(r, self.repo)]
+
+    def next_to_start(self, now: dt.datetime) -> Run | None:
+        """The first pending run, in plan order, whose expected time fits before the deadline."""
+        for run in self.pending():
+            if logged_step(run.work) >= run.steps:
+                continue  # finished here, waiting to be collected
+            if self.remaining(run) <= self.minutes_left(now):
+                return run
+        return None
+
+    def collect_finished_work(self) -> None:
+        """Runs finished in the worktree whose logs are not yet in results/ (the queue
+        stopped between the two) are collected first."""
+        for run in self.runs:
+            if not finished(run, self.repo) and logged_step(run.work) >= run.steps:
+                self.collect(run)
+
+    def start(self, run: Run) -> None:
+        run.work.mkdir(parents=True, exist_ok=True)
+        if (pid := running_pid(run.work)) is not None:
+            self.failed.add(run.dest)
+            say(f"NOT STARTED {run.dest}: process {pid} (another queue?) is training it")
+            return
+        step, logged = checkpoint_step(run.work), logged_step(run.work)
+        if step:
+            how = f"resuming from its checkpoint at env step {step}"
+        elif logged >= 0 or logged_step(self.repo / run.dest) >= 0:
+            seen = max(logged, logged_step(self.repo / run.dest))
+            how = (f"STARTING OVER: no checkpoint on this machine (an earlier attempt had "
+                   f"evaluated up to env step {seen})")
+        else:
+            how = "starting"
+        with (run.work / "stdout.log").open("a") as out:
+            out.write(f"run_queue {dt.datetime.now():%Y-%m-%d %H:%M:%S}: {how}, "
+                      f"commit {self.commit[:10]}\n")
+            out.flush()
+            proc = subprocess.Popen(run.argv(self.python, self.module), cwd=self.worktree,
+                                    stdout=out, stderr=subprocess.STDOUT,
+                                    env={**os.environ, "OMP_NUM_THREADS": "1",
+                                         "MKL_NUM_THREADS": "1"})
+        (run.work / PID_FILE).write_text(str(proc.pid))
+        self.running[run.dest] = (run, proc, dt.datetime.now())
+        say(f"{how}: {run.dest} (expected {self.remaining(run):.0f} min, "
+            f"{self.minutes_left(dt.datetime.now()):.0f} min to the deadline)")
+
+    def collect(self, run: Run) -> None:
+        problems = session_problems(run.work, self.commit)
+        if problems:
+            self.failed.add(run.dest)
+            say(f"NOT COLLECTED {run.dest}: {'; '.join(problems)}")
+            return
+        copy_logs(run.work, self.repo / run.dest)
+        row = last_row(self.repo / run.dest / "eval.csv") or {}
+        minutes = wall_minutes(self.repo / run.dest) or 0.0
+        message = (f"Run queue: {run.dest} finished ({run.steps} env steps, code "
+                   f"{self.commit[:10]}, final eval return "
+                   f"{float(row.get('episode_reward', 'nan')):.1f}, {minutes:.0f} min)")
+        outcome = commit_results(self.repo, run.dest, message) if self.commit_results else "copied"
+        say(f"finished {run.dest}: {outcome}")
+
+    def reap(self) -> None:
+        for dest, (run, proc, _) in list(self.running.items()):
+            status = proc.poll()
+            if status is None:
+                continue
+            del self.running[dest]
+            (run.work / PID_FILE).unlink(missing_ok=True)
+            if status == 0 and logged_step(run.work) >= run.steps:
+                self.collect(run)
+            elif status in (130, -signal.SIGTERM):
+                say(f"stopped {dest} at its checkpoint (env step {checkpoint_step(run.work)})")
+            else:
+                self.failed.add(dest)
+                say(f"FAILED {dest} (exit {status}): see {run.work / 'stdout.log'}")
+
+    def stop_all(self) -> None:
+        for run, proc, _ in self.running.values():
+            say(f"deadline: SIGTERM to {run.dest}")
+            proc.send_signal(signal.SIGTERM)
+        end = time.monotonic() + self.stop_grace_seconds
+        while self.running and time.monotonic() < end:
+            time.sleep(0.2)
+            self.reap()
+        for run, proc, _ in self.running.values():
+            say(f"{run.dest} did not stop in {self.stop_grace_seconds:.0f} s: SIGKILL")
+            proc.kill()
+            proc.wait()
+        self.reap()
+
+    def report(self) -> None:
+        parts = []
+        for run, _, _ in self.running.values():
+            row = last_row(run.work / "train.csv") or {}
+            parts.append(f"{run.dest} {int(row.get('env_step', 0)) // 1000}k/{run.steps // 1000}k")
+        say(f"running: {', '.join(parts) or 'none'}; pending {len(self.pending())}; "
+            f"failed {len(self.failed)}")
+
+    def run(self) -> int:
+        """Start, watch and collect runs until none is left that fits, or the deadline.
+        SIGTERM/SIGINT to the queue stop its runs at their checkpoints first."""
+        previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+        try:
+            return self._run()
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+
+    def _run(self) -> int:
+        self.collect_finished_work()
+        last_report = time.monotonic()
+        try:
+            while True:
+                self.reap()
+                now = dt.datetime.now()
+                if now >= self.deadline:
+                    self.stop_all()
+                    break
+                while len(self.running) < self.parallel and (run := self.next_to_start(now)):
+                    self.start(run)
+                if not self.running:
+                    break
+                if time.monotonic() - last_report > 600:
+                    self.report()
+                    last_report = time.monotonic()
+                time.sleep(self.poll_seconds)
+        except KeyboardInterrupt:
+            self.stop_all()
+        left = self.pending()
+        say(f"queue done: {len(left)} run(s) left" + (f" ({', '.join(r.dest for r in left)})"
+                                                      if left else "")
+            + (f"; failed: {', '.join(sorted(self.failed))}" if self.failed else ""))
+        return 1 if self.failed else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("plan", help="plan file ('-': stdin)")
+    parser.add_argument("--commit", required=True, help="the commit every run is trained with")
+    parser.add_argument("--deadline", required=True, help="HH:MM, +90m, +2h or an ISO time")
+    parser.add_argument("--worktree", type=Path, help="default: ../queue-<commit> beside the checkout")
+    parser.add_argument("--parallel", type=int, default=2)
+    parser.add_argument("--estimate", action="append", default=[], metavar="PATTERN=MINUTES",
+                        help="minutes for runs whose path or group matches, until one has finished")
+    parser.add_argument("--default-minutes", type=float, default=60.0)
+    parser.add_argument("--python", default=sys.executable)
+    parser.add_argument("--module", default="agents.train", help=argparse.SUPPRESS)
+    parser.add_argument("--no-commit", action="store_true", help="copy finished logs, do not commit")
+    parser.add_argument("--poll-seconds", type=float, default=10.0, help=argparse.SUPPRESS)
+    parser.add_argument("--dry-run", action="store_true")
+    args = parser.parse_args(argv)
+    try:
+        text = sys.stdin.read() if args.plan == "-" else Path(args.plan).read_text()
+        runs = read_plan(text)
+        commit, worktree = pinned_worktree(REPO, args.commit, args.worktree)
+        queue = Queue(runs, REPO, commit, worktree, parse_deadline(args.deadline, dt.datetime.now()),
+                      args.parallel, parse_estimates(args.estimate), args.default_minutes,
+                      args.python, args.module, not args.no_commit, args.poll_seconds)
+    except (OSError, PlanError) as err:
+        print(f"run_queue: error: {err}", file=sys.stderr)
+        return 2
+    say(f"queue: {len(runs)} runs, commit {commit[:10]} in {worktree}, deadline "
+        f"{queue.deadline:%Y-%m-%d %H:%M}, {queue.parallel} at a time")
+    if args.dry_run:
+        for run in queue.pending():
+            fits = queue.remaining(run) <= queue.minutes_left(dt.datetime.now())
+            print(f"{queue.remaining(run):6.0f} min {'fits' if fits else 'late'}  {run.dest}  "
+                  f"{shlex.join(run.argv(args.python, args.module))}")
+        return 0
+    return queue.run()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

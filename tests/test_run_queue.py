@@ -1,0 +1,194 @@
+"""The run queue's decisions (benchmarks/run_queue.py), with a stand-in trainer that
+trains nothing: skip finished runs, resume from checkpoints, start over loudly, start
+only what fits before the deadline, stop at the deadline with SIGTERM, copy logs
+without checkpoints and commit exactly them."""
+from __future__ import annotations
+
+import datetime as dt
+import importlib.util
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+SPEC = importlib.util.spec_from_file_location(
+    "run_queue", Path(__file__).resolve().parent.parent / "benchmarks" / "run_queue.py")
+rq = importlib.util.module_from_spec(SPEC)
+sys.modules["run_queue"] = rq
+SPEC.loader.exec_module(rq)
+
+# A trainer with geomdp-train's contract: resumes from checkpoint/state.json, logs
+# eval.csv/train.csv/sessions.csv, checkpoints every step, exits 130 on SIGTERM.
+FAKE_TRAIN = textwrap.dedent('''
+    import json, os, signal, subprocess, sys, time
+    from pathlib import Path
+    opts = dict(a.split("=", 1) for a in sys.argv[1:])
+    run_dir, steps = Path(opts["hydra.run.dir"]), int(opts["train.steps"])
+    delay = float(opts.get("delay", "0.01"))
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(130))
+    commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
+    ckpt = run_dir / "checkpoint" / "state.json"
+    step = json.loads(ckpt.read_text())["env_step"] if ckpt.exists() else 0
+    if step == 0:
+        (run_dir / "eval.csv").write_text("env_step,wall_time,episode_reward\\n")
+        (run_dir / "train.csv").write_text("env_step,wall_time\\n")
+    with (run_dir / "sessions.csv").open("a") as f:
+        if f.tell() == 0:
+            f.write("env_step,git_commit,git_dirty\\n")
+        f.write(f"{step},{commit},False\\n")
+    ckpt.parent.mkdir(exist_ok=True)
+    while step < steps:
+        time.sleep(delay)
+        step += 1
+        for name in ("eval.csv", "train.csv"):
+            with (run_dir / name).open("a") as f:
+                f.write(f"{step},{60.0 * step}" + (",1.0" if name == "eval.csv" else "") + "\\n")
+        ckpt.write_text(json.dumps({"env_step": step}))
+    print("done", run_dir)
+''')
+
+
+def git(repo: Path, *args: str) -> str:
+    return subprocess.run(["git", "-C", str(repo), *args], check=True, capture_output=True,
+                          text=True).stdout.strip()
+
+
+@pytest.fixture
+def repo(tmp_path: Path) -> Path:
+    repo = tmp_path / "checkout"
+    repo.mkdir()
+    git(repo, "init", "-q")
+    git(repo, "config", "user.email", "t@t")
+    git(repo, "config", "user.name", "t")
+    (repo / "fake_train.py").write_text(FAKE_TRAIN)
+    (repo / ".gitignore").write_text("checkpoint/\n")
+    git(repo, "add", ".")
+    git(repo, "commit", "-q", "-m", "code")
+    return repo
+
+
+def make_queue(repo: Path, plan: str, minutes_left: float, **kw: object) -> rq.Queue:
+    commit, worktree = rq.pinned_worktree(repo, "HEAD", repo.parent / "pinned")
+    deadline = dt.datetime.now() + dt.timedelta(minutes=minutes_left)
+    return rq.Queue(rq.read_plan(plan), repo, commit, worktree, deadline, python=sys.executable,
+                    module="fake_train", poll_seconds=0.05, stop_grace_seconds=10, **kw)
+
+
+def test_plan_lines_are_checked() -> None:
+    runs = rq.read_plan("# comment\nresults/a/D8/seed1 100 agent.group=D8 seed=1  # why\n")
+    assert [(r.dest, r.steps, r.overrides, r.group) for r in runs] == [
+        ("results/a/D8/seed1", 100, ["agent.group=D8", "seed=1"], "results/a/D8")]
+    for bad, says in [("results/a many", "<env steps>"), ("../x 10", "inside the checkout"),
+                      ("r/a 1\nr/a 2", "listed twice")]:
+        with pytest.raises(rq.PlanError, match=says):
+            rq.read_plan(bad)
+    with pytest.raises(rq.PlanError, match="PATTERN=MINUTES"):
+        rq.parse_estimates(["results/a=soon"])
+    now = dt.datetime(2026, 1, 1, 12, 0)
+    assert rq.parse_deadline("13:30", now) == dt.datetime(2026, 1, 1, 13, 30)
+    assert rq.parse_deadline("11:00", now) == dt.datetime(2026, 1, 2, 11, 0)
+    assert rq.parse_deadline("+2h", now) == dt.datetime(2026, 1, 1, 14, 0)
+    with pytest.raises(rq.PlanError, match="HH:MM"):
+        rq.parse_deadline("soon", now)
+
+
+def test_only_runs_that_fit_before_the_deadline_start(repo: Path) -> None:
+    plan = "results/x/slow/seed1 4\nresults/x/fast/seed1 4\nresults/x/fast/seed2 4\n"
+    queue = make_queue(repo, plan, minutes_left=20,
+                       estimates=rq.parse_estimates(["results/x/slow/*=45", "results/x/fast*=10"]))
+    now = dt.datetime.now()
+    assert queue.next_to_start(now).dest == "results/x/fast/seed1"  # slow (45 min) does not fit
+    # a finished run of the group replaces the estimate: 4 steps x 60 s + start-up = 5 min
+    done = repo / "results/x/slow/seed9"
+    done.mkdir(parents=True)
+    (done / "eval.csv").write_text("env_step,wall_time,episode_reward\n4,240.0,1.0\n")
+    queue.runs.append(rq.Run("results/x/slow/seed9", 4, [], repo / "unused"))
+    assert queue.remaining(queue.runs[0]) == pytest.approx(4 + rq.STARTUP_MINUTES)
+    assert queue.next_to_start(now).dest == "results/x/slow/seed1"
+    # half-way through its checkpoints, a run needs half the time (plus a start-up)
+    ckpt = queue.runs[0].work / "checkpoint"
+    ckpt.mkdir(parents=True)
+    (ckpt / "state.json").write_text('{"env_step": 2}')
+    assert queue.remaining(queue.runs[0]) == pytest.approx(2 + rq.STARTUP_MINUTES)
+    assert make_queue(repo, plan, minutes_left=1).next_to_start(now) is None
+
+
+def test_queue_skips_finished_resumes_partial_and_commits_logs_only(repo: Path) -> None:
+    plan = ("results/x/a/seed1 3 delay=0.01\n"   # finished earlier: skipped
+            "results/x/a/seed2 6 delay=0.01\n"   # checkpoint at 3 on this machine: resumes
+            "results/x/a/seed3 3 delay=0.01\n"   # logs committed, no checkpoint here: starts over
+            "results/x/a/seed4 3 delay=0.01\n")  # new
+    queue = make_queue(repo, plan, minutes_left=60,
+                       estimates=rq.parse_estimates(["results/x/*=1"]))
+    finished_before = repo / "results/x/a/seed1"
+    finished_before.mkdir(parents=True)
+    (finished_before / "eval.csv").write_text("env_step,wall_time,episode_reward\n3,1.0,5.0\n")
+    partial = queue.runs[1].work
+    partial.mkdir(parents=True)
+    subprocess.run([sys.executable, "-m", "fake_train", "train.steps=3",
+                    f"hydra.run.dir={partial}"], cwd=queue.worktree, check=True, capture_output=True)
+    earlier = repo / "results/x/a/seed3"
+    earlier.mkdir(parents=True)
+    (earlier / "eval.csv").write_text("env_step,wall_time,episode_reward\n0,0.0,0.0\n1,60.0,1.0\n")
+    head_before = git(repo, "rev-parse", "HEAD")
+    (repo / "unrelated.txt").write_text("work in progress")
+    git(repo, "add", "unrelated.txt")
+
+    assert queue.run() == 0
+    assert not (queue.worktree / "results/x/a/seed1").exists()
+    assert "resuming from its checkpoint at env step 3" in (partial / "stdout.log").read_text()
+    assert "STARTING OVER" in (queue.runs[2].work / "stdout.log").read_text()
+    assert "STARTING OVER" not in (queue.runs[3].work / "stdout.log").read_text()
+    for seed, steps in [(2, 6), (3, 3), (4, 3)]:
+        dest = repo / f"results/x/a/seed{seed}"
+        assert rq.logged_step(dest) == steps and not (dest / "checkpoint").exists()
+    # eval.csv of the resumed run holds steps 1..6 once each
+    assert (repo / "results/x/a/seed2/eval.csv").read_text().count("\n") == 7
+    commits = git(repo, "log", "--format=%s", f"{head_before}..HEAD").splitlines()
+    assert len(commits) == 3 and all("finished" in c for c in commits)
+    committed = git(repo, "diff", "--name-only", head_before, "HEAD").splitlines()
+    assert all(p.startswith("results/x/a/seed") for p in committed)
+    assert not any("checkpoint" in p for p in committed)
+    assert git(repo, "diff", "--cached", "--name-only") == "unrelated.txt"  # left staged
+
+
+def test_deadline_stops_runs_with_sigterm_and_they_resume(repo: Path) -> None:
+    plan = "results/x/long/seed1 100000 delay=0.01\n"
+    queue = make_queue(repo, plan, minutes_left=0.03, estimates=rq.parse_estimates(["*=0.01"]))
+    assert queue.run() == 0
+    run = queue.runs[0]
+    step = rq.checkpoint_step(run.work)
+    assert step and 0 < step < 100000 and rq.logged_step(run.work) == step
+    assert not (repo / run.dest).exists()  # unfinished: nothing copied, nothing committed
+    queue = make_queue(repo, plan.replace("100000", str(step + 2)), minutes_left=60,
+                       estimates=rq.parse_estimates(["*=0.01"]))
+    assert queue.run() == 0
+    assert f"resuming from its checkpoint at env step {step}" in (run.work / "stdout.log").read_text()
+    assert rq.logged_step(repo / run.dest) == step + 2
+
+
+def test_runs_from_another_commit_are_not_collected(repo: Path) -> None:
+    queue = make_queue(repo, "results/x/a/seed1 2\n", minutes_left=60,
+                       estimates=rq.parse_estimates(["*=0.01"]))
+    work = queue.runs[0].work
+    work.mkdir(parents=True)
+    (work / "eval.csv").write_text("env_step,wall_time,episode_reward\n2,1.0,1.0\n")
+    (work / "sessions.csv").write_text("env_step,git_commit,git_dirty\n0,0123456789abcdef,False\n")
+    assert queue.run() == 1
+    assert not (repo / "results/x/a/seed1").exists()
+
+
+def test_worktree_must_be_the_pinned_commit(repo: Path) -> None:
+    commit, worktree = rq.pinned_worktree(repo, "HEAD", repo.parent / "pinned")
+    (repo / "more.txt").write_text("x")
+    git(repo, "add", "more.txt")
+    git(repo, "commit", "-q", "-m", "later")
+    with pytest.raises(rq.PlanError, match="not the pinned"):
+        rq.pinned_worktree(repo, "HEAD", worktree)
+    (worktree / "fake_train.py").write_text("# edited\n")
+    with pytest.raises(rq.PlanError, match="local changes"):
+        rq.pinned_worktree(repo, commit, worktree)
+    with pytest.raises(rq.PlanError, match="not a commit"):
+        rq.pinned_worktree(repo, "no-such-commit", None)
