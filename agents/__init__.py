@@ -1,7 +1,14 @@
-"""Equivariant TD-MPC for Geometric MDPs: networks built from symmetry declarations."""
+"""Equivariant TD-MPC for Geometric MDPs: networks built from symmetry declarations.
 
-from agents.groups import AgentGroup, field_type, group_for_task, make_group
-from agents.networks import NetworkConfig, Networks, build_networks, project, squash
+Layers, bottom up: ``agents.nn`` (groups, equivariant layers, networks),
+``agents.tdmpc`` (world model, loss, planner, replay, the agent),
+``agents.run`` (options, trainer, checkpoints, logs) and ``agents.cli`` (the
+``geomdp-train``, ``geomdp-plot`` and ``geomdp-theory`` commands).
+"""
 
-__all__ = ["AgentGroup", "NetworkConfig", "Networks", "build_networks", "field_type",
-           "group_for_task", "make_group", "project", "squash"]
+from agents.nn.escnn_groups import AgentGroup, field_type, group_for_task, make_group, valid_groups
+from agents.nn.networks import NetworkConfig, Networks, build_networks, project, squash
+from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
+
+__all__ = ["AgentGroup", "NetworkConfig", "Networks", "TDMPCAgent", "TDMPCConfig", "build_networks",
+           "field_type", "group_for_task", "make_group", "project", "squash", "valid_groups"]

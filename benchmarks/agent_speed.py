@@ -79,9 +79,9 @@ gymnasium.logger.min_level = 40
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 import geomdp_envs
-from agents import train
-from agents.replay import make_replay_buffer, sample_slices
-from agents.tdmpc import TDMPCAgent
+from agents.cli import train
+from agents.tdmpc.replay import make_replay_buffer, sample_slices
+from agents.tdmpc.agent import TDMPCAgent
 task, repeats, overrides = sys.argv[2], int(sys.argv[3]), sys.argv[4:]
 with initialize_config_dir(config_dir=str(train.CONFIG_DIR), version_base="1.3"):
     cfg = compose("train", overrides=[f"env={task}", *overrides])

@@ -20,8 +20,8 @@ import torch
 import torch.nn.functional as F
 from timing import best_time
 
-from agents.fourier import FourierLinear
-from agents.groups import make_group
+from agents.nn.escnn_groups import make_group
+from agents.nn.fourier import FourierLinear
 
 CASES = [("D8", 32), ("octahedral", 26), ("icosahedral", 17)]
 BATCHES = (268, 1280)

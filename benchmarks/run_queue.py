@@ -30,6 +30,7 @@ import datetime as dt
 import fnmatch
 import json
 import os
+import re
 import shlex
 import shutil
 import signal
@@ -230,6 +231,18 @@ def pinned_worktree(repo: Path, commit: str, path: Path | None) -> tuple[str, Pa
     return full, path
 
 
+def trainer_module(worktree: Path) -> str:
+    """The module of ``geomdp-train`` in the pinned commit (it moved between commits)."""
+    try:
+        text = (worktree / "pyproject.toml").read_text()
+    except OSError:
+        text = ""
+    match = re.search(r'^geomdp-train\s*=\s*"([\w.]+):\w+"', text, re.M)
+    if match is None:
+        raise PlanError(f"{worktree}/pyproject.toml names no geomdp-train entry point")
+    return match.group(1)
+
+
 def parse_deadline(text: str, now: dt.datetime) -> dt.datetime:
     """``HH:MM`` (today, or tomorrow if already past), ``+90m``/``+2h``, or ISO 8601."""
     try:
@@ -258,12 +271,13 @@ class Queue:
     def __init__(self, runs: list[Run], repo: Path, commit: str, worktree: Path,
                  deadline: dt.datetime, parallel: int = 2, estimates: list[tuple[str, float]] = (),
                  default_minutes: float = 60.0, python: str = sys.executable,
-                 module: str = "agents.train", commit_results: bool = True,
+                 module: str | None = None, commit_results: bool = True,
                  poll_seconds: float = 10.0, stop_grace_seconds: float = 120.0) -> None:
         self.runs, self.repo, self.commit, self.worktree = runs, repo, commit, worktree
         self.deadline, self.parallel = deadline, parallel
         self.estimates, self.default_minutes = list(estimates), default_minutes
-        self.python, self.module, self.commit_results = python, module, commit_results
+        self.module = module or trainer_module(worktree)
+        self.python, self.commit_results = python, commit_results
         self.poll_seconds, self.stop_grace_seconds = poll_seconds, stop_grace_seconds
         for run in runs:
             run.work = worktree / run.dest
@@ -425,7 +439,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="minutes for runs whose path or group matches, until one has finished")
     parser.add_argument("--default-minutes", type=float, default=60.0)
     parser.add_argument("--python", default=sys.executable)
-    parser.add_argument("--module", default="agents.train", help=argparse.SUPPRESS)
+    parser.add_argument("--module", help=argparse.SUPPRESS)  # default: the commit's geomdp-train
     parser.add_argument("--no-commit", action="store_true", help="copy finished logs, do not commit")
     parser.add_argument("--poll-seconds", type=float, default=10.0, help=argparse.SUPPRESS)
     parser.add_argument("--dry-run", action="store_true")
@@ -446,7 +460,7 @@ def main(argv: list[str] | None = None) -> int:
         for run in queue.pending():
             fits = queue.remaining(run) <= queue.minutes_left(dt.datetime.now())
             print(f"{queue.remaining(run):6.0f} min {'fits' if fits else 'late'}  {run.dest}  "
-                  f"{shlex.join(run.argv(args.python, args.module))}")
+                  f"{shlex.join(run.argv(args.python, queue.module))}")
         return 0
     return queue.run()
 

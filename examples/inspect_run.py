@@ -17,11 +17,11 @@ import numpy as np
 import torch
 from omegaconf import OmegaConf
 
-from agents import checkpoint
-from agents.replay import make_replay_buffer
-from agents.tdmpc import TDMPCAgent
-from agents.train import agent_config, make_gym_env
-from agents.video import frames_per_second, write_video
+from agents.cli.train import agent_config, make_gym_env
+from agents.run import checkpoint
+from agents.run.video import frames_per_second, write_video
+from agents.tdmpc.agent import TDMPCAgent
+from agents.tdmpc.replay import make_replay_buffer
 
 
 def main() -> None:

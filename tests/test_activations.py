@@ -4,7 +4,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from agents.activations import ELU, activation
+from agents.nn.activations import ELU, activation
 
 EXTREMES = torch.tensor([-1e4, -104.0, -88.0, -20.0, -1.0, -1e-6, -1e-30, 0.0, 1e-30, 1e-6,
                          1.0, 20.0, 1e4])

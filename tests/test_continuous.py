@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from agents import NetworkConfig, build_networks, group_for_task, make_group
-from agents.spectral import GridActivation, SpectralLayerNorm, sampling_matrix
+from agents.nn.spectral import GridActivation, SpectralLayerNorm, sampling_matrix
 from geomdp_envs import groups
 from tests.test_planner import RecordingNoise, TransformedNoise, plan_twice
 
@@ -133,7 +133,7 @@ def test_hidden_layers_use_band_limited_fields_and_comparable_widths():
 
 def planner_error(group_name, element, grid_frequency, randomise_heads):
     """max |plan(g s) - g plan(s)| over two consecutive plans, given g-transformed noise."""
-    from agents.tdmpc import TDMPCAgent, TDMPCConfig
+    from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
 
     env_id, kwargs = TASKS[group_name]
     env = gymnasium.make(env_id, **kwargs)

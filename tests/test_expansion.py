@@ -21,16 +21,16 @@ from tensordict import TensorDict
 from torchrl.objectives import SoftUpdate
 
 from agents import NetworkConfig, build_networks
-from agents.layers import (
+from agents.nn.layers import (
     EquivariantLinear,
     ScopedExpansion,
     detached_parameters,
     expansion_scope,
     parameter_slots,
 )
-from agents.loss import LossConfig, TDMPCLoss
-from agents.tdmpc import TDMPCAgent, TDMPCConfig
-from agents.world_model import WorldModel
+from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
+from agents.tdmpc.loss import LossConfig, TDMPCLoss
+from agents.tdmpc.world_model import WorldModel
 
 SMALL = dict(hidden_dim=32, latent_dim=16, hidden_layers=2)
 IN = 66  # the D8 dynamics input: 4 latent regular fields and the action
@@ -183,8 +183,8 @@ def test_soft_update_through_torchrl_alone():
 
 
 def test_checkpoint_round_trip_gives_the_same_networks(tmp_path):
-    from agents import checkpoint
-    from agents.replay import ReplayConfig, make_replay_buffer
+    from agents.run import checkpoint
+    from agents.tdmpc.replay import ReplayConfig, make_replay_buffer
 
     a, data = agent(), batch()
     for _ in range(4):

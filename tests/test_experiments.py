@@ -8,8 +8,8 @@ import pytest
 from hydra import compose, initialize_config_dir
 from test_train import TINY, TRAIN
 
-from agents import plot
-from agents.train import CONFIG_DIR
+from agents.cli import plot
+from agents.cli.train import CONFIG_DIR
 
 EXPERIMENTS = sorted(p.stem for p in (CONFIG_DIR / "experiment").glob("*.yaml"))
 
@@ -80,6 +80,6 @@ def test_plot_title_defaults_to_the_folder_the_runs_share(tmp_path):
 
 
 def test_plot_without_runs_is_a_clear_error(tmp_path):
-    out = subprocess.run([sys.executable, "-m", "agents.plot", str(tmp_path)],
+    out = subprocess.run([sys.executable, "-m", "agents.cli.plot", str(tmp_path)],
                          capture_output=True, text=True)
     assert out.returncode != 0 and "no run directories" in out.stderr

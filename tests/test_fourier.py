@@ -12,8 +12,8 @@ import pytest
 import torch
 from escnn import nn as enn
 
-from agents.fourier import FourierLinear, _FourierMap
-from agents.groups import make_group
+from agents.nn.escnn_groups import make_group
+from agents.nn.fourier import FourierLinear, _FourierMap
 
 GROUPS = ["D4", "D8", "D16", "C8", "octahedral", "icosahedral"]
 
@@ -228,7 +228,7 @@ def test_split_layer_from_latent_and_action_is_escnns_layer(name):
     EquivariantLinear on the action. Same parameter count as escnn's single layer, its
     forward equals its dense expansion, it is exactly equivariant, and its expanded
     entries have escnn's initial scale (variance ~ 1/fan_in of the whole input)."""
-    from agents.layers import EquivariantLinear, SplitLinear, make_linear
+    from agents.nn.layers import EquivariantLinear, SplitLinear, make_linear
 
     group = make_group(name)
     latent = group.gspace.type(*[group.regular] * 3)

@@ -13,9 +13,9 @@ import torch.nn.functional as F
 from tensordict import TensorDict
 
 from agents import NetworkConfig, build_networks
-from agents.layers import expansion_scope
-from agents.loss import LossConfig, TDMPCLoss
-from agents.world_model import WorldModel
+from agents.nn.layers import expansion_scope
+from agents.tdmpc.loss import LossConfig, TDMPCLoss
+from agents.tdmpc.world_model import WorldModel
 
 BATCH, HORIZON = 16, 4
 

@@ -6,8 +6,8 @@ import pytest
 import torch
 
 from agents import NetworkConfig, build_networks, group_for_task, make_group, squash
-from agents.layers import EquivariantLinear, FieldLayerNorm, submodules
-from agents.networks import project
+from agents.nn.layers import EquivariantLinear, FieldLayerNorm, submodules
+from agents.nn.networks import project
 from geomdp_envs import groups
 
 SMALL = dict(hidden_dim=24, latent_dim=16, hidden_layers=2)
@@ -296,8 +296,8 @@ def test_gradients_are_finite_with_states_exactly_on_target(group_name, task):
     of TD-MPC's loss stays finite."""
     from tensordict import TensorDict
 
-    from agents.loss import LossConfig, TDMPCLoss
-    from agents.world_model import WorldModel
+    from agents.tdmpc.loss import LossConfig, TDMPCLoss
+    from agents.tdmpc.world_model import WorldModel
 
     sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
     nets = build_networks(NetworkConfig(group=group_name, **SMALL), sym)
@@ -321,7 +321,7 @@ def test_gradients_are_finite_with_states_exactly_on_target(group_name, task):
 def test_irrep_basis_layers_give_the_same_networks_as_dense_ones(group_name, task, randomise_heads):
     """layers=fourier (auto for sqrt width) and layers=dense: the same parameter counts,
     and both exactly equivariant."""
-    from agents.fourier import FourierLinear
+    from agents.nn.fourier import FourierLinear
 
     sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
     counts = {}

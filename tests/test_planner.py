@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import torch
 
-from agents.planner import NoiseSource
-from agents.tdmpc import TDMPCAgent, TDMPCConfig
+from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
+from agents.tdmpc.planner import NoiseSource
 from geomdp_envs import groups
 
 

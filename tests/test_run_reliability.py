@@ -12,8 +12,8 @@ import torch
 from hydra import compose, initialize_config_dir
 from test_train import config, rows
 
-from agents import checkpoint
-from agents.train import CONFIG_DIR, run, sweep_dirname, usable_cores
+from agents.cli.train import CONFIG_DIR, run, sweep_dirname, usable_cores
+from agents.run import checkpoint
 
 LOGS = ("eval.csv", "train.csv")
 ROOT = Path(__file__).resolve().parents[1]

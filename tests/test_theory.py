@@ -100,7 +100,7 @@ def test_lqr_oracle_solves_pointmass2d():
 
 
 def test_theory_report_command_runs(capsys):
-    from agents import theory_report
+    from agents.cli import theory as theory_report
 
     theory_report.main(["--quick", "--hidden", "32", "--latent", "8"])
     out = capsys.readouterr().out

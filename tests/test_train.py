@@ -11,7 +11,7 @@ import time
 import pytest
 from hydra import compose, initialize_config_dir
 
-from agents.train import CONFIG_DIR, rewrite_env_shorthand, run
+from agents.cli.train import CONFIG_DIR, rewrite_env_shorthand, run
 
 # A run small enough for CI: 125-step episodes, one evaluation episode, a tiny agent.
 TINY = ["env.action_repeat=8", "train.steps=2000", "train.seed_steps=1000",
@@ -21,7 +21,7 @@ TINY = ["env.action_repeat=8", "train.steps=2000", "train.seed_steps=1000",
         "agent.planner.num_samples=16", "agent.planner.num_elites=4",
         "agent.planner.num_pi_trajs=2", "agent.planner.iterations=1", "agent.horizon=3",
         "agent.batch_size=8", "agent.replay.capacity=5000", "logger.tensorboard=false"]
-TRAIN = [sys.executable, "-c", "from agents.train import main; main()"]
+TRAIN = [sys.executable, "-c", "from agents.cli.train import main; main()"]
 
 
 def config(*overrides):

@@ -38,12 +38,12 @@ from torchrl.envs.transforms import FrameSkipTransform
 from tqdm import tqdm
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
-from agents import checkpoint, faults
-from agents.nested import differences, flatten
-from agents.replay import make_replay_buffer, sample_slices, update_priorities
-from agents.run_log import RunLog, RunLogError
-from agents.tdmpc import TDMPCAgent, TDMPCConfig
-from agents.video import frames_per_second, write_video
+from agents.run import checkpoint, faults
+from agents.run.nested import differences, flatten
+from agents.run.run_log import RunLog, RunLogError
+from agents.run.video import frames_per_second, write_video
+from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
+from agents.tdmpc.replay import make_replay_buffer, sample_slices, update_priorities
 from geomdp_envs.mujoco_env import load_triton_before_mesa
 from geomdp_envs.symmetry import Symmetry
 
@@ -163,7 +163,7 @@ def validate(cfg: DictConfig) -> tuple[TDMPCConfig, Symmetry | None, int, int]:
             raise ConfigError(f"agent.group={agent_cfg.networks.group} needs a task that declares "
                               f"its symmetry ({', '.join(TASK_ENVS)}); {cfg.env.id} does not: "
                               "use agent.group=none")
-        from agents.groups import group_for_task
+        from agents.nn.escnn_groups import group_for_task
 
         nets = agent_cfg.networks
         try:
@@ -480,7 +480,7 @@ def checkpoint_options(cfg: DictConfig) -> dict[str, Any]:
     return {k: v for k, v in flat.items() if not k.startswith(RESUMABLE_KEYS)}
 
 
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
 MAX_DIRNAME = 120
 
 

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import torch
 
-from agents.networks import project
-from agents.world_model import WorldModel
+from agents.nn.networks import project
+from agents.tdmpc.world_model import WorldModel
 
 
 @dataclass

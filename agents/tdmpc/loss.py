@@ -27,8 +27,8 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictParams
 from torchrl.objectives import LossModule
 
-from agents.layers import detached_parameters, expansion_scope, parameter_slots
-from agents.world_model import WorldModel
+from agents.nn.layers import detached_parameters, expansion_scope, parameter_slots
+from agents.tdmpc.world_model import WorldModel
 
 
 @dataclass

@@ -75,7 +75,7 @@ TRAIN_COLUMNS = ["env_step", "agent_step", "episode", "wall_time", "updates", "l
 # session may run other code; float rounding differs between versions).
 SESSION_COLUMNS = ["env_step", "started", "git_commit", "git_dirty", "torch", "escnn",
                    "torchrl", "host"]
-_CODE_ROOT = Path(__file__).resolve().parent.parent
+_CODE_ROOT = Path(__file__).resolve().parents[2]
 
 
 def code_version() -> dict[str, str]:

@@ -26,7 +26,7 @@ import numpy as np
 from omegaconf import OmegaConf
 from scipy import stats
 
-from agents.nested import flatten
+from agents.run.nested import flatten
 
 IGNORED_KEYS = ("seed", "train.progress", "train.threads", "logger", "device",
                 "train.eval_every", "train.eval_episodes", "train.eval_noisy_episodes",

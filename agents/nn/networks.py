@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 import torch
 from torch import nn
 
-from agents.activations import ACTIVATIONS
-from agents.groups import AgentGroup, field_type, group_for_task
-from agents.layers import (
+from agents.nn.activations import ACTIVATIONS
+from agents.nn.escnn_groups import AgentGroup, field_type, group_for_task
+from agents.nn.layers import (
     LINEAR_KINDS,
     Layout,
     concat,
@@ -34,7 +34,7 @@ from agents.layers import (
     make_linear,
     norm_and_activation,
 )
-from agents.spectral import Quadrature
+from agents.nn.spectral import Quadrature
 from geomdp_envs.symmetry import Field, Symmetry
 
 WIDTH_STRATEGIES = ("sqrt", "linear")
@@ -59,7 +59,7 @@ class NetworkConfig:
     # is faster, dense for linear width (few fields), where it is not (BENCHMARKS.md).
     layers: str = "auto"
     # Continuous groups (SO2, O2, SO3, O3): hidden fields keep frequencies <= max_frequency,
-    # nonlinearities sample a grid exact to grid_frequency (null: agents.groups' defaults).
+    # nonlinearities sample a grid exact to grid_frequency (null: agents.nn.escnn_groups' defaults).
     max_frequency: int | None = None
     grid_frequency: int | None = None
     # A continuous group that is only an approximate symmetry of the task (O2 on

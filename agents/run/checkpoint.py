@@ -29,10 +29,10 @@ import numpy as np
 import torch
 from torchrl.data import TensorDictReplayBuffer
 
-from agents import faults
-from agents.nested import differences
-from agents.replay import load_replay, save_replay
-from agents.tdmpc import TDMPCAgent
+from agents.run import faults
+from agents.run.nested import differences
+from agents.tdmpc.agent import TDMPCAgent
+from agents.tdmpc.replay import load_replay, save_replay
 
 FORMAT_VERSION = 3
 MANIFEST = "manifest.json"

@@ -16,7 +16,7 @@ declared rep       C_N / octahedral / icosah.   D_N (reflection y -> -y)
 The continuous groups SO(2), O(2) (reflection y -> -y, as D_N), SO(3) and O(3)
 (reflections: the inversion -I times a rotation) follow the same table: SO(n)
 like C_N, O(n) like D_N, with escnn's determinant irrep(1, 0) as ``sign``. Their
-hidden fields are band-limited functions on the group (``agents/spectral.py``)
+hidden fields are band-limited functions on the group (``agents/nn/spectral.py``)
 instead of regular representations, and their finite checks below run on a
 fixed sample of elements.
 
@@ -38,7 +38,7 @@ from escnn import group as escnn_group
 from escnn import gspaces
 from escnn import nn as enn
 
-from agents import spectral
+from agents.nn import spectral
 from geomdp_envs import groups as env_groups
 from geomdp_envs.symmetry import Field, Symmetry, rep_matrix
 

@@ -17,7 +17,7 @@ import gymnasium
 import numpy as np
 
 import geomdp_envs  # noqa: F401
-from agents.networks import NetworkConfig, build_networks
+from agents.nn.networks import NetworkConfig, build_networks
 from geomdp_envs import groups, lqr
 from geomdp_envs.theory import dimension_table
 

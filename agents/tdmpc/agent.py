@@ -11,13 +11,13 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.objectives import SoftUpdate
 
-from agents.layers import expansion_scope
-from agents.loss import LossConfig, TDMPCLoss
-from agents.networks import NetworkConfig, build_networks
-from agents.planner import MPPIPlanner, NoiseSource, PlannerConfig
-from agents.replay import ReplayConfig
-from agents.spectral import GridActivation
-from agents.world_model import WorldModel
+from agents.nn.layers import expansion_scope
+from agents.nn.networks import NetworkConfig, build_networks
+from agents.nn.spectral import GridActivation
+from agents.tdmpc.loss import LossConfig, TDMPCLoss
+from agents.tdmpc.planner import MPPIPlanner, NoiseSource, PlannerConfig
+from agents.tdmpc.replay import ReplayConfig
+from agents.tdmpc.world_model import WorldModel
 from geomdp_envs.symmetry import Symmetry
 
 # escnn's buffers in every equivariant layer (``EquivariantLinear.layer``): the basis,

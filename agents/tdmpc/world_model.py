@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from agents.networks import Networks, project, squash
+from agents.nn.networks import Networks, project, squash
 from geomdp_envs.symmetry import Field
 
 

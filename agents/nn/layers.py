@@ -27,8 +27,8 @@ import torch.nn.functional as F
 from escnn import nn as enn
 from torch import nn
 
-from agents.activations import activation
-from agents.spectral import GridActivation, Quadrature, SpectralLayerNorm
+from agents.nn.activations import activation
+from agents.nn.spectral import GridActivation, Quadrature, SpectralLayerNorm
 
 Layout = int | enn.FieldType
 
@@ -368,7 +368,7 @@ def make_linear(in_layout: Layout, out_layout: Layout, bias: bool = True,
     bias_init = 1 / math.sqrt(layout_size(in_layout))
     regular, rest = _regular_prefix(in_layout) if kind == "fourier" else (None, None)
     if regular is not None and is_regular(out_layout):
-        from agents.fourier import FourierLinear
+        from agents.nn.fourier import FourierLinear
 
         fourier = FourierLinear(regular, out_layout, bias=bias, bias_init=bias_init)
         if rest is None:
@@ -475,7 +475,7 @@ def norm_and_activation(layout: Layout, activation_name: str,
                         grid: Quadrature | None = None) -> list[nn.Module]:
     """LayerNorm then the nonlinearity, for a hidden layout: pointwise on plain and
     regular fields; on band-limited fields of a continuous group, LayerNorm of their
-    functions (exact) and the nonlinearity sampled on ``grid`` (``agents/spectral.py``)."""
+    functions (exact) and the nonlinearity sampled on ``grid`` (``agents/nn/spectral.py``)."""
     if is_pointwise(layout):
         return [FieldLayerNorm(layout), activation(activation_name)]
     if grid is None:

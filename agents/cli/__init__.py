@@ -1,0 +1,2 @@
+"""The command-line tools: ``geomdp-train`` (``train``), ``geomdp-plot`` (``plot``)
+and ``geomdp-theory`` (``theory``)."""
