@@ -79,20 +79,24 @@ gymnasium.logger.min_level = 40
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 import geomdp_envs
-from agents.cli import train
+from agents.cli.train import CONFIG_DIR
+from agents.run.config import RunOptions, check_task
+from agents.run.envs import make_gym_env, torchrl_env
+from agents.run.trainer import REPLAY_KEYS
 from agents.tdmpc.replay import make_replay_buffer, sample_slices
 from agents.tdmpc.agent import TDMPCAgent
 task, repeats, overrides = sys.argv[2], int(sys.argv[3]), sys.argv[4:]
-with initialize_config_dir(config_dir=str(train.CONFIG_DIR), version_base="1.3"):
+with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
     cfg = compose("train", overrides=[f"env={task}", *overrides])
-agent_cfg = train.agent_config(cfg)
-env, symmetry = train.make_env(cfg.env)
-obs_size = env.observation_spec["observation"].shape[-1]
-agent = TDMPCAgent(agent_cfg, symmetry, obs_size, env.action_spec.shape[-1])
+options = RunOptions.from_config(OmegaConf.to_container(cfg, resolve=True))
+info = check_task(options)
+agent_cfg = options.agent
+env = torchrl_env(make_gym_env(options.env.id, options.env.kwargs), options.env.action_repeat)
+agent = TDMPCAgent(agent_cfg, info.symmetry, info.observation_size, info.action_size)
 buffer = make_replay_buffer(agent_cfg.replay, agent_cfg.horizon, agent_cfg.batch_size)
 td = env.rollout(1000, break_when_any_done=True)
 td.set("episode", torch.zeros(td.shape[0], dtype=torch.int64))
-buffer.extend(td.select(*train.REPLAY_KEYS))
+buffer.extend(td.select(*REPLAY_KEYS))
 obs = td["observation"][0]
 def timed(fn):
     for _ in range(3):
@@ -130,14 +134,17 @@ matmul = timed(lambda: a @ b)
 # The arithmetic actually done (matmul-type ops, by torch's own FLOP formulas) in one
 # plan and one update, untimed. A dispatch mode of our own: torch's FlopCounterMode
 # also tracks modules, and its tracker tests TorchRL's modules for truth, which raises.
-from torch.utils._python_dispatch import TorchDispatchMode
+try:  # torch's private dispatch-mode base, behind agents.compat (checkouts from before it: direct)
+    from agents.compat.torch import TorchDispatchMode
+except ImportError:
+    from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils.flop_counter import flop_registry
 class CountFlops(TorchDispatchMode):
     total = 0
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         kwargs = kwargs or {}
         out = func(*args, **kwargs)
-        formula = flop_registry.get(func._overloadpacket)
+        formula = flop_registry.get(func.overloadpacket)
         if formula is not None:
             kwargs = {k: v for k, v in kwargs.items() if k != "out"}
             CountFlops.total += formula(*args, **kwargs, out_val=out)

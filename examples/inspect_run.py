@@ -17,8 +17,9 @@ import numpy as np
 import torch
 from omegaconf import OmegaConf
 
-from agents.cli.train import agent_config, make_gym_env
 from agents.run import checkpoint
+from agents.run.config import RunOptions
+from agents.run.envs import declared_symmetry, make_gym_env
 from agents.run.video import frames_per_second, write_video
 from agents.tdmpc.agent import TDMPCAgent
 from agents.tdmpc.replay import make_replay_buffer
@@ -32,11 +33,12 @@ def main() -> None:
     parser.add_argument("--video", type=Path, default=None, help="write the first episode to this MP4")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    cfg = OmegaConf.load(args.run_dir / "config.yaml")
-    agent_cfg = agent_config(cfg)
-    env = make_gym_env(cfg.env, render_mode="rgb_array" if args.video else None)
-    sym = getattr(env.unwrapped, "symmetry", None)
-    agent = TDMPCAgent(agent_cfg, sym, env.observation_space.shape[0], env.action_space.shape[0])
+    options = RunOptions.from_config(OmegaConf.to_container(OmegaConf.load(args.run_dir / "config.yaml")))
+    agent_cfg = options.agent
+    env = make_gym_env(options.env.id, options.env.kwargs,
+                       render_mode="rgb_array" if args.video else None)
+    agent = TDMPCAgent(agent_cfg, declared_symmetry(env), env.observation_space.shape[0],
+                       env.action_space.shape[0])
     state = checkpoint.load(args.run_dir, agent, make_replay_buffer(
         agent_cfg.replay, agent_cfg.horizon, agent_cfg.batch_size))
     if state is None:
@@ -51,7 +53,7 @@ def main() -> None:
             if frames is not None:
                 frames.append(env.render())
             action = agent.act(torch.as_tensor(obs), state["agent_step"], explore=False).numpy()
-            for _ in range(int(cfg.env.action_repeat)):
+            for _ in range(options.env.action_repeat):
                 obs, reward, terminated, truncated, _ = env.step(action)
                 total += reward
                 done = terminated or truncated
@@ -61,7 +63,7 @@ def main() -> None:
               f"return {total:.1f}")
         if frames is not None:
             frames.append(env.render())
-            fps = frames_per_second(env, int(cfg.env.action_repeat))
+            fps = frames_per_second(env, options.env.action_repeat)
             print(f"video: {write_video(args.video, frames, fps)} ({len(frames)} frames)")
 
 

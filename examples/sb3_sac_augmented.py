@@ -23,17 +23,26 @@ from geomdp_envs import Symmetry, augment_transitions
 
 
 class SymmetricReplayBuffer(ReplayBuffer):
-    """SB3's replay buffer, returning each sampled transition moved by a random g."""
+    """SB3's replay buffer, returning each sampled transition moved by a random g.
+
+    Counts the transitions it returned (``sampled``) and those the augmentation
+    changed (``moved``: all but those drawn with the identity, or fixed by g).
+    """
 
     def __init__(self, *args, symmetry: Symmetry, seed: int = 0, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.symmetry = symmetry
         self.rng = np.random.default_rng(seed)
+        self.sampled = self.moved = 0
 
     def sample(self, batch_size: int, env=None):  # noqa: ANN001, ANN201
         batch = super().sample(batch_size, env)
         obs, actions, next_obs = augment_transitions(
             self.symmetry, batch.observations, batch.actions, batch.next_observations, self.rng)
+        changed = ((obs != batch.observations).any(-1) | (actions != batch.actions).any(-1)
+                   | (next_obs != batch.next_observations).any(-1))
+        self.sampled += len(changed)
+        self.moved += int(changed.sum())
         return batch._replace(observations=obs, actions=actions, next_observations=next_obs)
 
 
@@ -57,6 +66,9 @@ def main(argv: list[str] | None = None) -> float:
     model = SAC("MlpPolicy", env, seed=args.seed, learning_starts=min(1000, args.steps // 2),
                 device="cpu", verbose=0, **buffer)
     model.learn(total_timesteps=args.steps)
+    if not args.no_augment:
+        replay = model.replay_buffer
+        print(f"augmentation moved {replay.moved} of {replay.sampled} sampled transitions")
     mean, std = evaluate_policy(model, env, n_eval_episodes=args.eval_episodes)
     print(f"{args.env}: return {mean:.1f} +- {std:.1f} over {args.eval_episodes} episodes "
           f"after {args.steps} steps ({'plain' if args.no_augment else 'augmented'} SAC)")

@@ -48,21 +48,10 @@ def is_finite(name: str) -> bool:
     return name not in CONTINUOUS_GROUPS
 
 
-def group_order(name: str) -> int:
-    """Number of elements of a finite group."""
-    return len(group_elements(name))
-
-
 def rotation_2d(angle: float) -> np.ndarray:
     """Counter-clockwise rotation of the plane by ``angle`` radians."""
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, -s], [s, c]])
-
-
-def reflection_2d(axis_angle: float) -> np.ndarray:
-    """Reflection of the plane across the line through the origin at ``axis_angle``."""
-    c, s = np.cos(2 * axis_angle), np.sin(2 * axis_angle)
-    return np.array([[c, s], [s, -c]])
 
 
 def rotation_3d(axis: np.ndarray, angle: float) -> np.ndarray:

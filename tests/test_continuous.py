@@ -139,8 +139,8 @@ def planner_error(group_name, element, grid_frequency, randomise_heads):
     env = gymnasium.make(env_id, **kwargs)
     sym = env.unwrapped.symmetry
     cfg = TDMPCConfig.from_dict({
-        "networks": {"group": group_name, "hidden_dim": 32, "latent_dim": 16,
-                     "allow_approximate": True, "grid_frequency": grid_frequency},
+        "group": group_name, "allow_approximate": True,
+        "networks": {"hidden_dim": 32, "latent_dim": 16, "grid_frequency": grid_frequency},
         "planner": {"num_samples": 64, "num_elites": 8, "num_pi_trajs": 8, "iterations": 3},
         "horizon": 3, "batch_size": 8})
     torch.manual_seed(0)

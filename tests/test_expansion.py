@@ -126,7 +126,7 @@ def test_swapped_in_parameters_are_seen_inside_and_outside_a_scope():
 
 
 def agent(group="D8", seed=0):
-    cfg = TDMPCConfig.from_dict({"networks": {"group": group, **SMALL}, "batch_size": 16,
+    cfg = TDMPCConfig.from_dict({"group": group, "networks": SMALL, "batch_size": 16,
                                  "horizon": 3, "tau": 0.2, "target_update_every": 1})
     sym = pointmass2d()
     return TDMPCAgent(cfg, sym, sym.observation_size, sym.action_size, seed=seed)

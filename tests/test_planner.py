@@ -50,7 +50,7 @@ def _make_agent(env_id, kwargs, group, randomise_heads):
     env = gymnasium.make(env_id, **kwargs)
     sym = env.unwrapped.symmetry
     cfg = TDMPCConfig.from_dict({
-        "networks": {"group": group, "hidden_dim": 32, "latent_dim": 16},
+        "group": group, "networks": {"hidden_dim": 32, "latent_dim": 16},
         "planner": {"num_samples": 64, "num_elites": 8, "num_pi_trajs": 8, "iterations": 3},
         "horizon": 3, "batch_size": 8})
     agent = TDMPCAgent(cfg, sym, sym.observation_size, sym.action_size)

@@ -20,9 +20,12 @@ hidden fields are band-limited functions on the group (``agents/nn/spectral.py``
 instead of regular representations, and their finite checks below run on a
 fixed sample of elements.
 
-and ``AgentGroup.element_matrix`` gives each escnn element as the orthogonal
-d x d matrix the declaration is written for, so the two agree by construction;
-``field_type`` checks it on every element anyway.
+The declaration and escnn meet on matrices: ``AgentGroup.element_matrix`` gives
+each escnn element as the orthogonal d x d matrix (its standard representation)
+that the declaration is written for, so a declared field's matrix at that element
+and escnn's representation of the field agree by construction. ``field_type``
+still checks the two against each other on every element (on the fixed sample,
+for continuous groups).
 """
 
 from __future__ import annotations
@@ -46,7 +49,7 @@ PLANAR_GROUPS = ("C4", "C8", "C16", "D4", "D8", "D16")  # the paper's; any C<N>/
 SPATIAL_GROUPS = ("octahedral", "icosahedral")
 # agent name -> (the declaration's name for it, d, default band limit L of hidden fields).
 # Default grids: frequency 4L + 3 in 2D (16 angles for L = 3), 4L + 1 in 3D (for
-# L = 1 the icosahedral group's 60 rotations). Measured (BENCHMARKS.md): relative
+# L = 1 the icosahedral group's 60 rotations). Measured (docs/design.md): relative
 # equivariance error of a network about 1% under random elements; the 3D grid is
 # the cheapest that keeps it there (SO(3) with L = 2 and an 864-point grid costs 20x
 # a plain network at 0.4% error).
@@ -57,7 +60,11 @@ _PLANAR = re.compile(r"^([CD])([1-9][0-9]*)$")
 
 @dataclass(frozen=True)
 class AgentGroup:
-    """A finite group the agent's networks are equivariant to."""
+    """A group the agent's networks are equivariant to, as escnn builds it: a finite
+    subgroup of O(2) or O(3) (C<N>, D<N>, octahedral, icosahedral) or one of the
+    continuous groups SO(2), O(2), SO(3), O(3) (``continuous``: no ``order``, hidden
+    fields band-limited to ``max_frequency``, nonlinearities on a quadrature grid
+    exact to ``grid_frequency``)."""
 
     name: str
     escnn: escnn_group.Group

@@ -45,7 +45,6 @@ transform matrix), so each irrep looks like a real-type one with
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,6 +52,8 @@ import torch
 from escnn import nn as enn
 from escnn.group import Group
 from torch import nn
+
+from agents.compat.torch import ConversionHook
 
 
 @dataclass(frozen=True)
@@ -68,10 +69,6 @@ class IrrepBlock:
     @property
     def multiplicity(self) -> int:
         return len(self.offsets)
-
-    @property
-    def endo_dim(self) -> int:
-        return len(self.endomorphisms)
 
 
 @dataclass(frozen=True)
@@ -148,7 +145,7 @@ def _regular_group(field_type: enn.FieldType) -> Group:
     return group
 
 
-class FourierLinear(nn.Module):
+class FourierLinear(ConversionHook):
     """A G-equivariant linear map between regular fields, applied in the irrep basis.
 
     Takes and returns plain tensors ``[..., c |G|]`` in escnn's spatial layout
@@ -244,14 +241,13 @@ class FourierLinear(nn.Module):
                 bound = 1 / math.sqrt(self.c_in * self.order) if bias_init is None else bias_init
                 self.bias.uniform_(-bound, bound)
 
-    def _apply(self, fn: Callable, *args: object, **kwargs: object) -> FourierLinear:
+    def converted(self) -> None:
         # Rebuild the constant transforms from their float64 masters, so .double() is exact
         # rather than float32 values widened.
-        super()._apply(fn, *args, **kwargs)
         for name, exact in self._exact.items():
-            buffer = self._buffers[name]
-            self._buffers[name] = exact.to(device=buffer.device, dtype=buffer.dtype)
-        return self
+            buffer = self.get_buffer(name)
+            self.register_buffer(name, exact.to(device=buffer.device, dtype=buffer.dtype),
+                                 persistent=False)
 
     def _group_weights(self, g: BlockGroup, weights: torch.Tensor | None = None) -> torch.Tensor:
         """The group's block matrices [n, m c_out, d c_in], rows (s, o), columns ((k, r), i)."""

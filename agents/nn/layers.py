@@ -16,9 +16,9 @@ parameters would not.
 from __future__ import annotations
 
 import contextlib
-import copy
 import io
 import math
+from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -27,6 +27,8 @@ import torch.nn.functional as F
 from escnn import nn as enn
 from torch import nn
 
+from agents.compat.escnn import basis_blocks, own_basis_expansion
+from agents.compat.torch import child_modules, parameter_table
 from agents.nn.activations import activation
 from agents.nn.spectral import GridActivation, Quadrature, SpectralLayerNorm
 
@@ -119,7 +121,7 @@ class EquivariantLinear(ScopedExpansion):
     [basis, out x in]) and one copy into place; escnn's own ``expand_parameters``
     (an einsum, then copies through index lists) gives the same matrix and stays
     the reference in the tests. Measured on a D8 hidden layer: 20 us against 166 us
-    forward, 120 against 386 us forward and backward (BENCHMARKS.md).
+    forward, 120 against 386 us forward and backward (docs/design.md).
     """
 
     def __init__(self, in_type: enn.FieldType, out_type: enn.FieldType, bias: bool = True,
@@ -132,13 +134,13 @@ class EquivariantLinear(ScopedExpansion):
         # escnn caches one basis module per pair of representations and shares it
         # between layers, so .to()/.double() on one network would change the others'
         # buffers (seen: a float network failing after another was made double). Own a copy.
-        self.layer._basisexpansion = copy.deepcopy(self.layer._basisexpansion)
+        own_basis_expansion(self.layer)
         if self.layer.bias is not None and bias_init > 0:
             # escnn starts biases (one per trivial sub-field) at zero; see ``make_linear``
             # for why they are spread out instead, as nn.Linear's are.
             with torch.no_grad():
                 self.layer.bias.uniform_(-bias_init, bias_init)
-        pairs = _field_type_pairs(self.layer._basisexpansion)
+        pairs = _field_type_pairs(self.layer)
         self._pairs = [pair for pair, _, _ in pairs]
         for k, (_, basis, indices) in enumerate(pairs):
             # Buffers (so they follow .to()), not persistent: rebuilt with the network.
@@ -224,11 +226,12 @@ class _FieldTypePair:
     cols: slice | None
 
 
-def _field_type_pairs(expansion: nn.Module) -> list[
+def _field_type_pairs(layer: enn.Linear) -> list[
         tuple[_FieldTypePair, torch.Tensor, tuple[torch.Tensor, torch.Tensor] | None]]:
-    """The pairs of an escnn ``BlocksBasisExpansion`` (the layout of its ``forward``),
-    each with its sampled basis as a [basis, out_size x in_size] matrix and, when its
-    fields are not adjacent, the channel indices of its rows and columns."""
+    """The pairs of an escnn ``Linear``'s ``BlocksBasisExpansion`` (the layout of its
+    ``forward``), each with its sampled basis as a [basis, out_size x in_size] matrix
+    and, when its fields are not adjacent, the channel indices of its rows and columns."""
+    expansion = layer.basisexpansion
     if expansion.S != 1:
         raise ValueError(f"expected a 0-dimensional base space (one sample), got {expansion.S}")
 
@@ -242,17 +245,20 @@ def _field_type_pairs(expansion: nn.Module) -> list[
     def adjacent(positions: list[int]) -> bool:
         return positions == list(range(positions[0], positions[-1] + 1))
 
-    out_channels, in_channels = channels(expansion._out_reprs), channels(expansion._in_reprs)
+    # The representations escnn's expansion was built from, in the same order.
+    out_reprs, in_reprs = layer.out_type.representations, layer.in_type.representations
+    out_channels, in_channels = channels(out_reprs), channels(in_reprs)
+    out_count, in_count = Counter(r.name for r in out_reprs), Counter(r.name for r in in_reprs)
     pairs = []
-    for in_name, out_name in expansion._representations_pairs:
-        block = getattr(expansion, f"block_expansion_{expansion._escape_pair((in_name, out_name))}")
+    for block in basis_blocks(expansion):
+        in_name, out_name = block.in_name, block.out_name
         basis = block.sampled_basis  # [basis, out_size, in_size, 1]
-        start, stop = expansion._weights_ranges[(in_name, out_name)]
+        start, stop = block.weights
         rows, cols = out_channels[out_name], in_channels[in_name]
         sliced = adjacent(rows) and adjacent(cols)
         pairs.append((_FieldTypePair(
-            weights=slice(start, stop), n_out=expansion._out_count[out_name],
-            n_in=expansion._in_count[in_name], out_size=basis.shape[1], in_size=basis.shape[2],
+            weights=slice(start, stop), n_out=out_count[out_name],
+            n_in=in_count[in_name], out_size=basis.shape[1], in_size=basis.shape[2],
             rows=slice(rows[0], rows[-1] + 1) if sliced else None,
             cols=slice(cols[0], cols[-1] + 1) if sliced else None),
             basis.reshape(basis.shape[0], -1).clone(),
@@ -282,7 +288,7 @@ def submodules(module: nn.Module) -> Iterator[nn.Module]:
             continue
         seen.add(id(current))
         yield current
-        stack.extend(reversed([m for m in current._modules.values() if m is not None]))
+        stack.extend(reversed(child_modules(current)))
 
 
 @contextlib.contextmanager
@@ -316,7 +322,7 @@ def parameter_slots(module: nn.Module) -> ParameterSlots:
     network's structure, fixed once it is built, so it is listed once; the parameters
     are read at each use."""
     return [(owner, name) for owner in submodules(module)
-            for name, p in owner._parameters.items() if p is not None]
+            for name, _ in owner.named_parameters(recurse=False, remove_duplicate=False)]
 
 
 @contextlib.contextmanager
@@ -327,14 +333,15 @@ def detached_parameters(slots: ParameterSlots) -> Iterator[None]:
     aliases and reuse the scope's expansion, detached (``ScopedExpansion.expanded``).
     What ``TensorDict.from_module(m).detach().to_module(m)`` does, for parameters only
     and without walking the modules: 12 us against 2.6 ms for the D8 twin Q."""
-    saved = [owner._parameters[name] for owner, name in slots]
+    tables = [parameter_table(owner) for owner, _ in slots]
+    saved = [table[name] for table, (_, name) in zip(tables, slots)]
     try:
-        for (owner, name), p in zip(slots, saved):
-            owner._parameters[name] = p.detach()
+        for table, (_, name), p in zip(tables, slots, saved):
+            table[name] = p.detach()
         yield
     finally:
-        for (owner, name), p in zip(slots, saved):
-            owner._parameters[name] = p
+        for table, (_, name), p in zip(tables, slots, saved):
+            table[name] = p
 
 
 LINEAR_KINDS = ("dense", "fourier")

@@ -18,8 +18,10 @@ network's tensor width and FLOPs, |G| times fewer parameters).
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass, field
+import typing
+from dataclasses import dataclass
 
 import torch
 from torch import nn
@@ -35,6 +37,7 @@ from agents.nn.layers import (
     norm_and_activation,
 )
 from agents.nn.spectral import Quadrature
+from agents.options import check, key, option, unknown
 from geomdp_envs.symmetry import Field, Symmetry
 
 WIDTH_STRATEGIES = ("sqrt", "linear")
@@ -42,44 +45,62 @@ COMPONENTS = ("transition", "q", "policy")
 
 
 @dataclass
-class NetworkConfig:
-    """Sizes are those of the plain network; equivariant ones follow ``width_strategy``."""
+class Equivariance:
+    """Which group the networks respect, and how: the options at the top of ``agent``."""
 
-    group: str | None = None
-    width_strategy: str = "sqrt"
-    latent_dim: int = 64
-    hidden_dim: int = 256
-    hidden_layers: int = 2
-    activation: str = "elu"
-    num_q: int = 2
-    equivariant: dict[str, bool] = field(
-        default_factory=lambda: {name: True for name in COMPONENTS})
-    # Equivariant layers into regular fields: dense (escnn's expanded matrix), fourier
-    # (block-diagonal in the irrep basis), or auto: fourier for sqrt width, where it
-    # is faster, dense for linear width (few fields), where it is not (BENCHMARKS.md).
-    layers: str = "auto"
-    # Continuous groups (SO2, O2, SO3, O3): hidden fields keep frequencies <= max_frequency,
-    # nonlinearities sample a grid exact to grid_frequency (null: agents.nn.escnn_groups' defaults).
-    max_frequency: int | None = None
-    grid_frequency: int | None = None
+    KEY: typing.ClassVar[str] = "agent"
+    group: str | None = None  # none | C<N> D<N> SO2 O2 | octahedral icosahedral SO3 O3 (the task decides)
+    width_strategy: str = option("sqrt", choices=WIDTH_STRATEGIES)
+    # Per component (transition: encoder, dynamics, reward; q; policy), for the ablation;
+    # a component left out is equivariant.
+    equivariant: dict[str, bool] = option(factory=lambda: {name: True for name in COMPONENTS})
     # A continuous group that is only an approximate symmetry of the task (O2 on
     # PointMass2D, whose walls keep only D4) is refused unless this is set.
     allow_approximate: bool = False
 
     def __post_init__(self) -> None:
-        if self.width_strategy not in WIDTH_STRATEGIES:
-            raise ValueError(f"width_strategy={self.width_strategy!r}; valid: "
-                             f"{', '.join(WIDTH_STRATEGIES)}")
-        if self.layers not in ("auto", *LINEAR_KINDS):
-            raise ValueError(f"layers={self.layers!r}; valid: auto, {', '.join(LINEAR_KINDS)}")
-        if self.activation not in ACTIVATIONS:
-            raise ValueError(f"activation={self.activation!r}; valid: {', '.join(ACTIVATIONS)}")
-        for name in ("latent_dim", "hidden_dim", "hidden_layers", "num_q"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        unknown = set(self.equivariant) - set(COMPONENTS)
-        if unknown:
-            raise ValueError(f"unknown components {sorted(unknown)}; valid: {', '.join(COMPONENTS)}")
+        if self.group == "none":
+            self.group = None
+        check(self)
+        for name in self.equivariant:
+            if name not in COMPONENTS:
+                raise unknown(f"{key(Equivariance, 'equivariant')}.{name}", COMPONENTS)
+
+
+@dataclass
+class Architecture:
+    """Sizes are those of the plain network; equivariant ones follow ``width_strategy``."""
+
+    KEY: typing.ClassVar[str] = "agent.networks"
+    latent_dim: int = option(64, low=1)
+    hidden_dim: int = option(256, low=1)
+    hidden_layers: int = option(2, low=1)
+    activation: str = option("elu", choices=tuple(ACTIVATIONS))
+    num_q: int = option(2, low=1)
+    # Equivariant layers into regular fields: dense (escnn's expanded matrix), fourier
+    # (block-diagonal in the irrep basis), or auto: fourier for sqrt width, where it
+    # is faster, dense for linear width (few fields), where it is not (BENCHMARKS.md).
+    layers: str = option("auto", choices=("auto", *LINEAR_KINDS))
+    # Continuous groups (SO2, O2, SO3, O3): hidden fields keep frequencies <= max_frequency,
+    # nonlinearities sample a grid exact to grid_frequency (null: agents.nn.escnn_groups' defaults).
+    max_frequency: int | None = None
+    grid_frequency: int | None = None
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+@dataclass
+class NetworkConfig(Equivariance, Architecture):
+    """Everything ``build_networks`` needs: the group options and the architecture."""
+
+    def __post_init__(self) -> None:
+        Equivariance.__post_init__(self)
+
+    @classmethod
+    def combine(cls, equivariance: Equivariance, architecture: Architecture) -> NetworkConfig:
+        return cls(**{f.name: getattr(equivariance, f.name) for f in dataclasses.fields(Equivariance)},
+                   **{f.name: getattr(architecture, f.name) for f in dataclasses.fields(Architecture)})
 
     def linear_kind(self) -> str:
         """The hidden layers' kind once ``auto`` is decided."""

@@ -25,7 +25,7 @@ Fourier nonlinearities). Rotating the coefficients translates the function.
   for rotations that map the grid to itself. Chosen over norm nonlinearities
   (exact, but a field's direction passes through unchanged; Weiler & Cesa 2019
   found them weaker) because the error can be driven down by the grid and is
-  measured (BENCHMARKS.md, tests/test_continuous.py).
+  measured (docs/design.md, tests/test_continuous.py).
 
 Grids are quadratures that integrate every irrep of frequency <= ``frequency``
 exactly: uniform angles for SO(2) (N = frequency + 1), the same for both

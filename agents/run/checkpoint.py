@@ -2,7 +2,7 @@
 
 A checkpoint is a directory ``checkpoint/`` in the run directory holding the
 agent (parameters, target network, optimisers, RNG), the replay buffer (what
-it holds, not its capacity: ``agents.replay.save_replay``), the loop state and
+it holds, not its capacity: ``agents.tdmpc.replay.save_replay``), the loop state and
 ``manifest.json``: the SHA-256 of every file and the run's options (seed
 included). It is written whole to ``checkpoint.tmp/`` (the manifest last)
 and swapped in by renames, so a kill
@@ -109,6 +109,16 @@ def recover(run_dir: Path) -> Path | None:
         shutil.rmtree(tmp, ignore_errors=True)
         return final
     return None
+
+
+def saved_step(run_dir: Path) -> int:
+    """The env step of the checkpoint a rerun will resume from (0: none); a save
+    interrupted mid-swap leaves it under ``checkpoint.old``."""
+    for path in (checkpoint_dir(run_dir), run_dir / "checkpoint.old"):
+        state = path / "state.json"
+        if state.exists():
+            return json.loads(state.read_text())["env_step"]
+    return 0
 
 
 def verify(path: Path, options: dict[str, Any] | None = None) -> dict[str, Any]:

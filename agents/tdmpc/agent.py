@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import typing
 from dataclasses import dataclass, field
 from typing import Any
@@ -12,8 +11,9 @@ from tensordict import TensorDictBase
 from torchrl.objectives import SoftUpdate
 
 from agents.nn.layers import expansion_scope
-from agents.nn.networks import NetworkConfig, build_networks
+from agents.nn.networks import Architecture, Equivariance, NetworkConfig, build_networks
 from agents.nn.spectral import GridActivation
+from agents.options import OptionError, check, from_dict, key, option
 from agents.tdmpc.loss import LossConfig, TDMPCLoss
 from agents.tdmpc.planner import MPPIPlanner, NoiseSource, PlannerConfig
 from agents.tdmpc.replay import ReplayConfig
@@ -28,16 +28,22 @@ ESCNN_BUFFERS = ("matrix", "expanded_bias", "bias_expansion")
 
 def rebuilt_with_networks(key: str) -> bool:
     """Whether a state-dict entry is one of escnn's rebuildable buffers (not saved)."""
-    return "_basisexpansion" in key or (".layer." in key and key.rsplit(".", 1)[-1] in ESCNN_BUFFERS)
+    from agents.compat.escnn import is_basis_expansion_key
+
+    return is_basis_expansion_key(key) or (".layer." in key and key.rsplit(".", 1)[-1] in ESCNN_BUFFERS)
 
 
 @dataclass
 class Schedule:
     """Linear interpolation from ``start`` to ``end`` over ``steps`` agent steps."""
 
-    start: float
-    end: float
-    steps: int
+    KEY: typing.ClassVar[str] = "agent.std_schedule"
+    start: float = option(low=0)
+    end: float = option(low=0)
+    steps: int = option(low=0)
+
+    def __post_init__(self) -> None:
+        check(self)
 
     def __call__(self, step: int) -> float:
         if self.steps <= 0:
@@ -47,77 +53,39 @@ class Schedule:
 
 
 @dataclass
-class TDMPCConfig:
-    """TD-MPC's hyperparameters (Hansen et al. 2022 defaults unless a preset says otherwise)."""
+class TDMPCConfig(Equivariance):
+    """TD-MPC's hyperparameters (Hansen et al. 2022 defaults unless a preset says
+    otherwise), nested as the ``agent`` section of a run's config."""
 
-    networks: NetworkConfig = field(default_factory=NetworkConfig)
+    KEY: typing.ClassVar[str] = "agent"
+    networks: Architecture = field(default_factory=Architecture)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     loss: LossConfig = field(default_factory=LossConfig)
     replay: ReplayConfig = field(default_factory=ReplayConfig)
-    horizon: int = 5
-    horizon_schedule: int = 25_000  # agent steps to grow the planning horizon from 1 to H
+    horizon: int = option(5, low=1)
+    horizon_schedule: int = option(25_000, low=0)  # agent steps to grow the horizon from 1 to H (0: H)
     std_schedule: Schedule = field(default_factory=lambda: Schedule(0.5, 0.05, 25_000))
-    lr: float = 1e-3
-    batch_size: int = 512
-    tau: float = 0.01
-    target_update_every: int = 2
-    grad_clip_norm: float = 10.0
+    lr: float = option(1e-3, low=0, low_open=True)
+    batch_size: int = option(512, low=1)
+    tau: float = option(0.01, low=0, low_open=True, high=1)
+    target_update_every: int = option(2, low=1)
+    grad_clip_norm: float = option(10.0, low=0, low_open=True)
 
     def __post_init__(self) -> None:
-        for name in ("horizon", "batch_size", "target_update_every"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"agent.{name} must be >= 1, got {getattr(self, name)}")
-        if self.horizon_schedule < 0:  # 0: the full horizon from the start
-            raise ValueError(f"agent.horizon_schedule must be >= 0, got {self.horizon_schedule}")
-        if not 0 < self.tau <= 1:
-            raise ValueError(f"agent.tau must be in (0, 1], got {self.tau}")
-        for name in ("lr", "grad_clip_norm"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"agent.{name} must be > 0, got {getattr(self, name)}")
+        Equivariance.__post_init__(self)
         if self.replay.capacity < self.batch_size * self.horizon:
-            raise ValueError(f"agent.replay.capacity ({self.replay.capacity}) must hold at least "
-                             f"one batch of slices (batch_size x horizon = "
-                             f"{self.batch_size * self.horizon})")
+            raise OptionError(f"{key(ReplayConfig, 'capacity')} ({self.replay.capacity}) must hold "
+                              f"at least one batch of slices (batch_size x horizon = "
+                              f"{self.batch_size * self.horizon})")
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TDMPCConfig:
-        """Build from nested plain data (a Hydra config), refusing unknown keys."""
-        nested = {"networks": NetworkConfig, "planner": PlannerConfig, "loss": LossConfig,
-                  "replay": ReplayConfig, "std_schedule": Schedule}
-        kwargs = {}
-        for key, value in data.items():
-            if key not in {f.name for f in dataclasses.fields(cls)}:
-                raise ValueError(f"unknown agent option {key!r}; valid: "
-                                 + ", ".join(f.name for f in dataclasses.fields(cls)))
-            if key in nested:
-                valid = {f.name for f in dataclasses.fields(nested[key])}
-                unknown = set(value) - valid
-                if unknown:
-                    raise ValueError(f"unknown agent.{key} option(s) {sorted(unknown)}; valid: "
-                                     + ", ".join(sorted(valid)))
-                for name, item in value.items():
-                    _check_type(nested[key], name, item, f"agent.{key}.")
-                value = nested[key](**value)
-            else:
-                _check_type(cls, key, value, "agent.")
-            kwargs[key] = value
-        return cls(**kwargs)
+        """Build from nested plain data (the ``agent`` section of a Hydra config)."""
+        return from_dict(cls, data)
 
-
-def _check_type(cls: type, name: str, value: Any, prefix: str) -> None:
-    """Refuse a value of the wrong type for a dataclass field (ints are floats; bools are not numbers)."""
-    expected = typing.get_type_hints(cls)[name]
-    options = typing.get_args(expected)
-    if len(options) == 2 and type(None) in options:  # X | None
-        if value is None:
-            return
-        expected = next(t for t in options if t is not type(None))
-    ok = {int: lambda v: isinstance(v, int) and not isinstance(v, bool),
-          float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
-          bool: lambda v: isinstance(v, bool), str: lambda v: isinstance(v, str)}.get(expected)
-    if ok is not None and not ok(value):
-        what = {int: "an integer", float: "a number", bool: "true or false", str: "a string"}[expected]
-        raise ValueError(f"{prefix}{name} must be {what}, got {value!r}")
+    def network_config(self) -> NetworkConfig:
+        """What ``build_networks`` takes: the group options and the architecture."""
+        return NetworkConfig.combine(self, self.networks)
 
 
 def _probe(size: int) -> torch.Tensor:
@@ -131,7 +99,8 @@ class TDMPCAgent:
                  observation_size: int, action_size: int,
                  device: torch.device | str = "cpu", seed: int = 0) -> None:
         self.config, self.device = config, torch.device(device)
-        self.networks = build_networks(config.networks, symmetry, observation_size, action_size)
+        self.observation_size, self.action_size = observation_size, action_size
+        self.networks = build_networks(config.network_config(), symmetry, observation_size, action_size)
         self.action_fields = self.networks.action_fields
         self.model = WorldModel(self.networks, self.action_fields,
                                 noise_clip=config.loss.noise_clip).to(self.device)
@@ -150,9 +119,10 @@ class TDMPCAgent:
         self.generator = torch.Generator().manual_seed(seed)
         self.noise = NoiseSource(self.generator)
         self.updates = 0
+        self.horizon_schedule = Schedule(1, config.horizon, config.horizon_schedule)
 
     def horizon(self, step: int) -> int:
-        return int(round(Schedule(1, self.config.horizon, self.config.horizon_schedule)(step)))
+        return int(round(self.horizon_schedule(step)))
 
     def act(self, obs: torch.Tensor, step: int, explore: bool) -> torch.Tensor:
         """Plan an action for ``obs``; ``step`` (agent steps) drives the schedules."""
@@ -164,8 +134,9 @@ class TDMPCAgent:
                                      min_std=self.config.std_schedule(step), explore=explore,
                                      noise=self.noise)
 
-    def update(self, batch: TensorDictBase) -> dict[str, float]:
-        """One gradient step on a [batch, horizon] TensorDict; returns losses and the priority."""
+    def update(self, batch: TensorDictBase) -> tuple[dict[str, float], torch.Tensor]:
+        """One gradient step on a [batch, horizon] TensorDict. Returns the losses and
+        health metrics, and each slice's new replay priority (TD-MPC's TD error)."""
         losses = self.loss(batch.to(self.device))
         self.model_optimizer.zero_grad(set_to_none=True)
         self.policy_optimizer.zero_grad(set_to_none=True)
@@ -185,8 +156,7 @@ class TDMPCAgent:
             "loss_model", "loss_pi", "consistency", "reward_error", "value_error", "q_mean",
             "td_target_mean")}
         metrics.update(model_grad_norm=float(model_grad), policy_grad_norm=float(policy_grad))
-        self.last_priority = losses["priority"]
-        return metrics
+        return metrics, losses["priority"]
 
     @torch.no_grad()
     def basis_fingerprints(self) -> dict[str, torch.Tensor]:
@@ -194,13 +164,17 @@ class TDMPCAgent:
         coefficients: checkpoints store coefficients only, and escnn computes some
         bases numerically (octahedral, icosahedral), so a resume checks that the
         rebuilt bases turn the same coefficients into the same maps. Likewise the
-        continuous groups' sampling grids, built from escnn's irreps."""
+        continuous groups' sampling grids, built from escnn's irreps.
+
+        The map is applied by the layer's own forward (W p + b), not by expanding W:
+        the same quantity, 20-50x cheaper for the irrep-basis layers of the paper
+        preset (BENCHMARKS.md), and it is computed at every checkpoint."""
         out = {}
+        dtype = next(self.model.parameters()).dtype
         for name, module in self.model.named_modules():
             if hasattr(module, "expand") and hasattr(module, "in_type"):
-                weight, bias = module.expand()
-                mapped = weight.double().cpu() @ _probe(weight.shape[1])
-                out[name] = mapped + (0 if bias is None else bias.double().cpu())
+                probe = _probe(module.in_type.size).to(self.device, dtype)[None]
+                out[name] = module(probe)[0].double().cpu()
             elif isinstance(module, GridActivation):  # sampled from escnn's irreps
                 out[name] = module.to_grid.double().cpu().T @ _probe(module.to_grid.shape[0])
         return out

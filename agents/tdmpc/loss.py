@@ -19,6 +19,7 @@ single backward); the policy then sees the Q of before the step.
 from __future__ import annotations
 
 import copy
+import typing
 from dataclasses import dataclass
 
 import torch
@@ -27,7 +28,9 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictParams
 from torchrl.objectives import LossModule
 
+from agents.compat.torchrl import expect_target_updater
 from agents.nn.layers import detached_parameters, expansion_scope, parameter_slots
+from agents.options import check, option
 from agents.tdmpc.world_model import WorldModel
 
 
@@ -35,23 +38,19 @@ from agents.tdmpc.world_model import WorldModel
 class LossConfig:
     """TD-MPC's loss coefficients (its defaults)."""
 
-    consistency_coef: float = 2.0
-    reward_coef: float = 0.5
-    value_coef: float = 0.1
-    rho: float = 0.5
-    discount: float = 0.99
-    policy_noise: float = 0.05  # TD-MPC's min_std: pi's noise in the TD target, pi loss and planner
-    noise_clip: float = 0.3  # TD-MPC clips that noise to +-0.3 (by norm for a vector field)
+    KEY: typing.ClassVar[str] = "agent.loss"
+    consistency_coef: float = option(2.0, low=0)
+    reward_coef: float = option(0.5, low=0)
+    value_coef: float = option(0.1, low=0)
+    rho: float = option(0.5, low=0, low_open=True, high=1)
+    discount: float = option(0.99, low=0, low_open=True, high=1)
+    # TD-MPC's min_std: pi's noise in the TD target, pi loss and planner
+    policy_noise: float = option(0.05, low=0)
+    # TD-MPC clips that noise to +-0.3 (by norm for a vector field)
+    noise_clip: float = option(0.3, low=0, low_open=True)
 
     def __post_init__(self) -> None:
-        for name in ("consistency_coef", "reward_coef", "value_coef", "policy_noise"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"loss.{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("rho", "discount"):
-            if not 0 < getattr(self, name) <= 1:
-                raise ValueError(f"loss.{name} must be in (0, 1], got {getattr(self, name)}")
-        if not self.noise_clip > 0:
-            raise ValueError(f"loss.noise_clip must be > 0, got {self.noise_clip}")
+        check(self)
 
 
 class TDMPCLoss(LossModule):
@@ -70,7 +69,7 @@ class TDMPCLoss(LossModule):
         self.model_params = TensorDict.from_module(model)
         self.target_model_params = TensorDictParams(
             TensorDict.from_module(self.target_model), no_convert=True)
-        self._has_update_associated["model"] = False  # until SoftUpdate registers itself
+        expect_target_updater(self, "model")  # until SoftUpdate registers itself
         self._q_slots = parameter_slots(model.qs)  # frozen in the policy loss
 
     def forward(self, batch: TensorDictBase) -> TensorDict:

@@ -17,11 +17,13 @@ Then ``plan(g.s) = g.plan(s)`` whenever the noise is transformed by g as well;
 
 from __future__ import annotations
 
+import typing
 from dataclasses import dataclass
 
 import torch
 
 from agents.nn.networks import project
+from agents.options import OptionError, check, key, option
 from agents.tdmpc.world_model import WorldModel
 
 
@@ -29,29 +31,21 @@ from agents.tdmpc.world_model import WorldModel
 class PlannerConfig:
     """TD-MPC's planning hyperparameters (its defaults)."""
 
-    iterations: int = 6
-    num_samples: int = 512
-    num_elites: int = 64
-    num_pi_trajs: int = 25  # TD-MPC's mixture_coef 0.05 of 512 samples
-    temperature: float = 0.5
-    momentum: float = 0.1
-    max_std: float = 2.0
-    discount: float = 0.99
+    KEY: typing.ClassVar[str] = "agent.planner"
+    iterations: int = option(6, low=1)
+    num_samples: int = option(512, low=1)
+    num_elites: int = option(64, low=1)
+    num_pi_trajs: int = option(25, low=0)  # TD-MPC's mixture_coef 0.05 of 512 samples
+    temperature: float = option(0.5, low=0, low_open=True)
+    momentum: float = option(0.1, low=0, high=1, high_open=True)
+    max_std: float = option(2.0, low=0, low_open=True)
+    discount: float = option(0.99, low=0, low_open=True)
 
     def __post_init__(self) -> None:
-        for name in ("iterations", "num_samples", "num_elites"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"planner.{name} must be >= 1, got {getattr(self, name)}")
-        if self.num_pi_trajs < 0:
-            raise ValueError(f"planner.num_pi_trajs must be >= 0, got {self.num_pi_trajs}")
-        for name in ("temperature", "max_std", "discount"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"planner.{name} must be > 0, got {getattr(self, name)}")
-        if not 0 <= self.momentum < 1:
-            raise ValueError(f"planner.momentum must be in [0, 1), got {self.momentum}")
+        check(self)
         if self.num_elites > self.num_samples + self.num_pi_trajs:
-            raise ValueError(f"planner.num_elites ({self.num_elites}) exceeds the number of "
-                             f"sampled trajectories ({self.num_samples + self.num_pi_trajs})")
+            raise OptionError(f"{key(PlannerConfig, 'num_elites')} ({self.num_elites}) exceeds the "
+                              f"number of sampled trajectories ({self.num_samples + self.num_pi_trajs})")
 
 
 class NoiseSource:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import typing
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,19 +15,22 @@ from torchrl.data import (
     TensorDictReplayBuffer,
 )
 
+from agents.compat.torchrl import priority_state, restore_priority_state
+from agents.options import check, option
+
 EPISODE_KEY = "episode"
 
 
 @dataclass
 class ReplayConfig:
-    capacity: int = 1_000_000
+    KEY: typing.ClassVar[str] = "agent.replay"
+    capacity: int = option(1_000_000, low=1)
     prioritized: bool = True  # TD-MPC's prioritised replay
-    alpha: float = 0.6
-    beta: float = 0.4
+    alpha: float = option(0.6, low=0)  # priority exponent (0: uniform)
+    beta: float = option(0.4, low=0, high=1)  # importance-sampling exponent
 
     def __post_init__(self) -> None:
-        if self.capacity < 1:
-            raise ValueError(f"replay.capacity must be >= 1, got {self.capacity}")
+        check(self)
 
 
 def make_replay_buffer(config: ReplayConfig, horizon: int, batch_size: int,
@@ -66,13 +70,11 @@ def save_replay(buffer: TensorDictReplayBuffer, path: Path) -> None:
     for the paper preset, at every checkpoint.
     """
     n = len(buffer.storage)
-    state: dict = {"len": n, "writer": buffer._writer.state_dict(),
+    state: dict = {"len": n, "writer": buffer.writer.state_dict(),
                    "data": buffer.storage[:n].clone() if n else None}
     sampler = buffer.sampler
     if isinstance(sampler, PrioritizedSliceSampler) and n:
-        index = torch.arange(n)
-        state["priorities"] = {"sum": sampler._sum_tree[index], "min": sampler._min_tree[index],
-                               "max": sampler._max_priority}
+        state["priorities"] = priority_state(sampler, n)
     torch.save(state, path)
 
 
@@ -87,8 +89,5 @@ def load_replay(buffer: TensorDictReplayBuffer, path: Path) -> None:
         index = torch.arange(n)
         buffer.storage.set(index, state["data"])
         if "priorities" in state:
-            sampler = buffer.sampler
-            sampler._sum_tree[index] = state["priorities"]["sum"]
-            sampler._min_tree[index] = state["priorities"]["min"]
-            sampler._max_priority = state["priorities"]["max"]
-    buffer._writer.load_state_dict(state["writer"])
+            restore_priority_state(buffer.sampler, n, state["priorities"])
+    buffer.writer.load_state_dict(state["writer"])

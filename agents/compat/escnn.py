@@ -1,0 +1,63 @@
+"""escnn internals: a ``Linear``'s basis-expansion module and the layout of its weights."""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import torch
+from escnn import nn as enn
+from escnn.nn.modules.basismanager import BlocksBasisExpansion
+
+# The attribute (and so the state-dict key component) of an escnn ``Linear``'s
+# basis-expansion module. Private: escnn exposes the module only through the
+# read-only property ``Linear.basisexpansion``, and state-dict keys carry the
+# attribute's name, so no public name tells its entries apart.
+BASIS_EXPANSION = "_basisexpansion"
+
+
+def is_basis_expansion_key(key: str) -> bool:
+    """Whether a state-dict key belongs to an escnn ``Linear``'s basis-expansion
+    module: sampled bases and indices that escnn rebuilds with the layer."""
+    return BASIS_EXPANSION in key
+
+
+def own_basis_expansion(layer: enn.Linear) -> None:
+    """Give ``layer`` a deep copy of its basis-expansion module, shared with no other layer.
+
+    escnn caches the modules of its bases and shares them between layers, so
+    ``.to()``/``.double()`` on one network would change another's buffers.
+    Private: ``Linear._basisexpansion``, the attribute behind the read-only
+    ``basisexpansion`` property; escnn has no setter and no option to not share.
+    """
+    layer._basisexpansion = copy.deepcopy(layer.basisexpansion)
+
+
+@dataclass(frozen=True)
+class BasisBlock:
+    """One (input representation, output representation) pair of a
+    ``BlocksBasisExpansion`` with a non-empty basis."""
+
+    in_name: str  # the representations' names
+    out_name: str
+    weights: tuple[int, int]  # [start, stop) of its coefficients in the layer's ``weights``
+    sampled_basis: torch.Tensor  # [basis, out_size, in_size, points]: escnn's own buffer
+
+
+def basis_blocks(expansion: BlocksBasisExpansion) -> list[BasisBlock]:
+    """The blocks of ``expansion``, in the order their coefficients lie in the flat
+    weight vector. A block's coefficients are ``[n_out, n_in, basis]`` (fields of
+    the output, then of the input representation, in their order in the types).
+
+    Private: ``_representations_pairs`` (the non-empty pairs, in weight order),
+    ``_weights_ranges``, and the naming of each pair's submodule,
+    ``block_expansion_<_escape_pair(pair)>``. The public ``get_basis_info()`` gives
+    the same layout as one dict per coefficient, in Python: seconds for a wide
+    layer, at every network build (tests/test_compat.py checks that the two agree).
+    """
+    blocks = []
+    for in_name, out_name in expansion._representations_pairs:
+        module = getattr(expansion, f"block_expansion_{expansion._escape_pair((in_name, out_name))}")
+        start, stop = expansion._weights_ranges[(in_name, out_name)]
+        blocks.append(BasisBlock(in_name, out_name, (start, stop), module.sampled_basis))
+    return blocks

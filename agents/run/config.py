@@ -1,0 +1,150 @@
+"""A run's options, declared and checked once: ``seed``, ``device``, ``train.*``,
+``logger.*``, ``env.*`` and the agent's (``agents.tdmpc.agent.TDMPCConfig``), the
+same nesting as ``configs/train.yaml``; and the checks that need the task (its
+declaration decides which groups are valid)."""
+
+from __future__ import annotations
+
+import importlib.util
+import typing
+import warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import torch
+
+from agents.nn.escnn_groups import group_for_task
+from agents.options import OptionError, check, from_dict, option
+from agents.run.envs import TASK_ENVS, declared_symmetry, make_gym_env
+from agents.run.nested import flatten
+from agents.tdmpc.agent import TDMPCConfig
+from geomdp_envs.symmetry import Symmetry
+
+# Options that may change when a run is continued (budgets and display), and the rest must not.
+RESUMABLE_KEYS = ("train.steps", "train.eval_every", "train.eval_episodes",
+                  "train.eval_noisy_episodes", "train.progress", "train.checkpoint_every",
+                  "train.video", "train.threads", "device", "logger.tensorboard")
+
+
+@dataclass
+class TrainOptions:
+    """The training loop's budgets and schedule (``train.*``)."""
+
+    KEY: typing.ClassVar[str] = "train"
+    steps: int = option(30000, low=1)            # environment steps (action repeats included)
+    seed_steps: int = option(2000, low=0)        # env steps of random actions before updates
+    updates_per_step: int = option(1, low=1)     # gradient updates per agent step
+    eval_every: int = option(5000, low=1)        # env steps between evaluations (and one at 0)
+    eval_episodes: int = option(10, low=1)
+    eval_noisy_episodes: int = option(3, low=0)  # the same start states with training noise
+    threads: int = option(1, low=1)              # torch threads
+    progress: bool = True
+    checkpoint_every: int = option(1000, low=1)  # env steps between checkpoints (at episode ends)
+    video: bool = False
+    video_every: int = option(5, low=1)
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+@dataclass
+class LoggerOptions:
+    KEY: typing.ClassVar[str] = "logger"
+    tensorboard: bool | str = option("auto", choices=(True, False, "auto"))
+
+    def __post_init__(self) -> None:
+        check(self)
+        if self.tensorboard is True and importlib.util.find_spec("tensorboard") is None:
+            raise OptionError("logger.tensorboard=true but the tensorboard package is not installed "
+                              "(pip install tensorboard); use logger.tensorboard=auto or false")
+
+
+@dataclass
+class EnvOptions:
+    """Which env (``id``), its action repeat, and the keyword arguments of ``gymnasium.make``
+    (every other key of the ``env`` section)."""
+
+    KEY: typing.ClassVar[str] = "env"
+    name: str = "pointmass2d"
+    id: str = "GeoMDP/PointMass2D-v0"
+    action_repeat: int = option(1, low=1)
+    kwargs: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check(self)
+
+    @classmethod
+    def from_section(cls, section: dict[str, Any]) -> EnvOptions:
+        meta = {k: v for k, v in section.items() if k in ("name", "id", "action_repeat")}
+        return from_dict(cls, {**meta, "kwargs": {k: v for k, v in section.items() if k not in meta}})
+
+
+@dataclass
+class RunOptions:
+    """Every option of a run; ``resolved`` is the config as written to ``config.yaml``."""
+
+    KEY: typing.ClassVar[str] = ""
+    seed: int = option(1, low=0)
+    device: str = "cpu"
+    train: TrainOptions = field(default_factory=TrainOptions)
+    logger: LoggerOptions = field(default_factory=LoggerOptions)
+    env: EnvOptions = field(default_factory=EnvOptions)
+    agent: TDMPCConfig = field(default_factory=TDMPCConfig)
+    resolved: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        check(self)
+        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
+            raise OptionError(f"device={self.device!r}; valid: cpu, cuda, cuda:<n>")
+        if self.device.startswith("cuda") and not torch.cuda.is_available():
+            raise OptionError(f"device={self.device} but no CUDA device is available; use device=cpu")
+
+    @classmethod
+    def from_config(cls, resolved: dict[str, Any]) -> RunOptions:
+        """From a resolved Hydra config (plain data), refusing unknown or bad options."""
+        data = dict(resolved)
+        if isinstance(data.get("env"), dict):
+            data["env"] = EnvOptions.from_section(data["env"])
+        if isinstance(data.get("agent"), dict):
+            data["agent"] = from_dict(TDMPCConfig, data["agent"])
+        if "resolved" in data:
+            raise OptionError("unknown option 'resolved'")
+        return from_dict(cls, {**data, "resolved": resolved})
+
+    def checkpoint_options(self) -> dict[str, Any]:
+        """The options a checkpoint belongs to: all but those a continued run may change."""
+        return {k: v for k, v in flatten(self.resolved).items() if not k.startswith(RESUMABLE_KEYS)}
+
+
+@dataclass(frozen=True)
+class Task:
+    """What the agent needs to know about the task: its declaration and vector sizes."""
+
+    symmetry: Symmetry | None
+    observation_size: int
+    action_size: int
+
+
+def check_task(options: RunOptions) -> Task:
+    """Make the env once (its own checks of its kwargs) and check the agent's group
+    against the task's declaration; warn once for an approximate group."""
+    env = make_gym_env(options.env.id, options.env.kwargs)
+    task = Task(declared_symmetry(env), env.observation_space.shape[0], env.action_space.shape[0])
+    env.close()
+    agent = options.agent
+    if agent.group is not None:
+        if task.symmetry is None:
+            raise OptionError(f"agent.group={agent.group} needs a task that declares its symmetry "
+                              f"({', '.join(TASK_ENVS)}); {options.env.id} does not: use "
+                              "agent.group=none")
+        nets = agent.networks
+        try:
+            _, exact = group_for_task(agent.group, task.symmetry, nets.max_frequency,
+                                      nets.grid_frequency, agent.allow_approximate, options.env.id)
+        except ValueError as err:
+            raise OptionError(str(err)) from None
+        if not exact:
+            warnings.warn(f"{agent.group} is only an approximate symmetry of {options.env.id} "
+                          f"(exact group: {task.symmetry.exact_group}); training anyway",
+                          stacklevel=1)
+    return task

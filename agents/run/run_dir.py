@@ -1,0 +1,122 @@
+"""The run directory: refused in one line when it cannot hold the run (not writable,
+disk too full, made with other options, in use by another process), and its records
+(``config.yaml``, ``.hydra/``) written only once the run is accepted."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import shutil
+from pathlib import Path
+from typing import IO, Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from agents.options import OptionError
+from agents.run.config import RESUMABLE_KEYS
+from agents.run.nested import differences
+
+LOCK_FILE = "run.lock"
+
+
+class RunDirError(OptionError):
+    """The run directory cannot hold the run (not writable, disk too full, in use)."""
+
+
+def check_writable(run_dir: Path) -> None:
+    """Refuse, in one line, a run directory (or left-over checkpoint) that cannot be written."""
+    probe = run_dir / ".geomdp-write-test"
+    try:
+        probe.write_text("ok")
+        probe.unlink()
+    except OSError as err:
+        raise RunDirError(f"cannot write in the run directory {run_dir} ({err.strerror}); "
+                          "choose another hydra.run.dir or fix its permissions") from None
+    for name in ("checkpoint", "checkpoint.old", "checkpoint.tmp"):
+        for path in [run_dir / name, *(run_dir / name).rglob("*")]:
+            if path.is_dir() and not os.access(path, os.W_OK | os.X_OK):
+                raise RunDirError(f"{path} is not writable: the run could not replace its "
+                                  "checkpoint; fix its permissions")
+
+
+def check_disk_space(run_dir: Path, state_bytes: int, capacity: int, obs_size: int,
+                     action_size: int) -> None:
+    """Refuse to start when the disk cannot hold two checkpoints (the new one is written
+    beside the old); estimated from the agent's state and the replay's full capacity."""
+    replay_bytes = capacity * (4 * (2 * obs_size + action_size + 2) + 8 * 2 + 16)
+    need = 2 * (state_bytes + replay_bytes) + (16 << 20)
+    free = shutil.disk_usage(run_dir).free
+    if free < need:
+        raise RunDirError(f"not enough disk space in {run_dir}: {free >> 20} MB free, a run of "
+                          f"this size needs about {need >> 20} MB for its checkpoints")
+
+
+def check_same_options(run_dir: Path, resolved: dict[str, Any]) -> None:
+    """Refuse to continue a run directory that was made with different options."""
+    saved_path = run_dir / "config.yaml"
+    if not saved_path.exists():
+        return
+    saved = OmegaConf.to_container(OmegaConf.load(saved_path), resolve=True)
+    diffs = [f"{k}: {a!r} -> {b!r}" for k, a, b in differences(saved, resolved)
+             if not k.startswith(RESUMABLE_KEYS)]
+    if diffs:
+        raise OptionError(f"{run_dir} holds a run with other options ({'; '.join(diffs)}); "
+                          "use another hydra.run.dir, or the run's own options")
+
+
+def write_records(run_dir: Path, resolved: dict[str, Any], composed: DictConfig | None = None,
+                  hydra: DictConfig | None = None, overrides: list[str] | None = None) -> None:
+    """The accepted run's options: ``config.yaml`` (resolved) and, from the command line,
+    Hydra's ``.hydra/`` records (Hydra's own writing is off: it would run before the
+    checks and overwrite a refused resume's records with options it never used)."""
+    OmegaConf.save(OmegaConf.create(resolved), run_dir / "config.yaml")
+    if composed is None:
+        return
+    records = run_dir / ".hydra"
+    records.mkdir(exist_ok=True)
+    OmegaConf.save(composed, records / "config.yaml")
+    if hydra is not None:
+        OmegaConf.save(OmegaConf.create({"hydra": hydra}), records / "hydra.yaml")
+    OmegaConf.save(OmegaConf.create(list(overrides or [])), records / "overrides.yaml")
+
+
+class RunDirLock:
+    """An exclusive lock on the run directory for the run's life: a second process on
+    the same directory is refused in one line instead of interleaving its log rows.
+    ``flock`` is released by the kernel when the process ends, however it ends."""
+
+    def __init__(self, run_dir: Path) -> None:
+        self.path = run_dir / LOCK_FILE
+        self._file: IO[str] | None = None
+
+    def __enter__(self) -> RunDirLock:
+        handle = self.path.open("a+")
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.seek(0)
+            holder = handle.read().strip() or "unknown"
+            handle.close()
+            raise RunDirError(f"{self.path.parent} is in use by another geomdp-train (pid "
+                              f"{holder}); wait for it to end, or use another hydra.run.dir") from None
+        handle.seek(0)
+        handle.truncate()
+        handle.write(str(os.getpid()))
+        handle.flush()
+        self._file = handle
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._file is not None:
+            self._file.close()  # closing releases the lock
+            self._file = None
+
+
+def remove_if_only_hydra_files(run_dir: Path) -> None:
+    """A run refused before any work leaves no directory behind (Hydra makes it first)."""
+    if not run_dir.is_dir():
+        return
+    entries = {p.name for p in run_dir.iterdir()}
+    log = run_dir / "train.log"
+    if entries <= {".hydra", "train.log"} and (not log.exists() or log.stat().st_size == 0):
+        shutil.rmtree(run_dir, ignore_errors=True)

@@ -1,0 +1,252 @@
+"""TD-MPC's training loop, given its parts.
+
+The loop follows TD-MPC: collect a whole episode with the planner (random actions for
+the first ``train.seed_steps``), then make one update per agent step collected, then
+evaluate when due and checkpoint. ``build_parts`` makes the parts from a run's options
+(seeding torch and numpy first, so a run is a function of its seed); a ``Trainer``
+receives them and writes nothing until ``restore()`` (continue from the run
+directory's checkpoint, or start its logs over) and ``train()``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModule
+from torchrl.data import TensorDictReplayBuffer
+from torchrl.envs import TransformedEnv
+from tqdm import tqdm
+
+from agents.run import checkpoint, faults
+from agents.run.config import RunOptions, Task
+from agents.run.envs import make_gym_env, torchrl_env
+from agents.run.run_dir import check_disk_space
+from agents.run.run_log import RunLog
+from agents.run.video import frames_per_second, write_video
+from agents.tdmpc.agent import TDMPCAgent
+from agents.tdmpc.replay import make_replay_buffer, sample_slices, update_priorities
+from geomdp_envs.mujoco_env import load_triton_before_mesa
+
+REPLAY_KEYS = ("observation", "action", "episode", ("next", "observation"),
+               ("next", "reward"), ("next", "terminated"))
+
+
+class StopRequest:
+    """Set by the command line's signal handlers; the loop stops at its next safe point
+    (between env steps or updates), so no library is interrupted half-way."""
+
+    def __init__(self) -> None:
+        self.signal: int | None = None
+
+    def check(self) -> None:
+        if self.signal is not None:
+            raise KeyboardInterrupt
+
+
+@dataclass
+class Parts:
+    """What a trainer trains: the training and evaluation envs (the latter also as the
+    Gymnasium env it wraps, to render videos), the agent and its replay buffer."""
+
+    env: TransformedEnv
+    eval_env: TransformedEnv
+    eval_gym_env: gymnasium.Env
+    agent: TDMPCAgent
+    buffer: TensorDictReplayBuffer
+
+
+def build_parts(options: RunOptions, task: Task) -> Parts:
+    """Seed torch and numpy, then make the envs, the agent and the replay (in this order:
+    the agent's initial weights come from the seeded global generator)."""
+    torch.set_num_threads(options.train.threads)
+    torch.manual_seed(options.seed)
+    np.random.seed(options.seed)
+    env_opts = options.env
+    env = torchrl_env(make_gym_env(env_opts.id, env_opts.kwargs), env_opts.action_repeat)
+    if options.train.video:
+        load_triton_before_mesa()
+    eval_gym_env = make_gym_env(env_opts.id, env_opts.kwargs,
+                                render_mode="rgb_array" if options.train.video else None)
+    eval_env = torchrl_env(eval_gym_env, env_opts.action_repeat)
+    agent = TDMPCAgent(options.agent, task.symmetry, task.observation_size, task.action_size,
+                       device=options.device, seed=options.seed)
+    buffer = make_replay_buffer(options.agent.replay, options.agent.horizon,
+                                options.agent.batch_size)
+    return Parts(env, eval_env, eval_gym_env, agent, buffer)
+
+
+class Trainer:
+    """TD-MPC's training loop with evaluation, logging and checkpoints."""
+
+    def __init__(self, options: RunOptions, run_dir: Path, parts: Parts, log: RunLog,
+                 stop: StopRequest | None = None) -> None:
+        self.options, self.run_dir, self.log = options, run_dir, log
+        self.env, self.eval_env, self.eval_gym_env = parts.env, parts.eval_env, parts.eval_gym_env
+        self.agent, self.buffer = parts.agent, parts.buffer
+        self.stop = stop or StopRequest()
+        self.action_repeat = options.env.action_repeat
+        self.checkpoint_options = options.checkpoint_options()
+        self.state = {"env_step": 0, "agent_step": 0, "episode": 0, "pending_updates": 0,
+                      "wall_time": 0.0, "last_eval_step": None, "last_eval_reward": None,
+                      "last_checkpoint_step": 0}
+
+    def restore(self) -> int:
+        """Continue from the run directory's checkpoint (its logs cut back to it), or
+        start its logs over; record this session. Returns the env step it starts from."""
+        restored = checkpoint.load(self.run_dir, self.agent, self.buffer, self.checkpoint_options)
+        if restored is not None:
+            self.state.update({k: restored[k] for k in self.state})
+            dropped = self.log.truncate_after(self.state["env_step"])
+            print(f"resuming {self.run_dir} at env step {self.state['env_step']} "
+                  f"(dropped {dropped} log rows written after the checkpoint)")
+        else:
+            # No checkpoint: the run starts over, and so do its logs (killed before the
+            # first checkpoint, or the checkpoint deleted): never two runs in one table.
+            dropped = self.log.truncate_after(-1)
+            if dropped:
+                print(f"starting {self.run_dir} over (no checkpoint; dropped {dropped} log rows)")
+        state_bytes = 4 * sum(p.numel() * p.element_size() for p in self.agent.model.parameters())
+        check_disk_space(self.run_dir, state_bytes, self.options.agent.replay.capacity,
+                         self.agent.observation_size, self.agent.action_size)
+        self.log.record_session(self.state["env_step"])
+        return self.state["env_step"]
+
+    # acting
+    def random_action(self) -> torch.Tensor:
+        """A uniform action in the agent's action domain (unit ball per vector field)."""
+        out = []
+        for f in self.agent.action_fields:
+            if f.size == 1:
+                out.append(torch.rand(1, generator=self.agent.generator) * 2 - 1)
+            else:
+                v = torch.randn(f.size, generator=self.agent.generator)
+                radius = torch.rand(1, generator=self.agent.generator) ** (1 / f.size)
+                out.append(v / v.norm() * radius)
+        return torch.cat(out)
+
+    def policy(self, explore: bool, random: bool, frames: list[np.ndarray] | None = None,
+               phase: str = "acting") -> TensorDictModule:
+        """The acting policy for one episode: random warm-up actions, or the planner;
+        with ``frames``, the eval env is rendered before every action."""
+        step = [self.state["agent_step"]]
+        phase = "seeding" if random else phase
+
+        def act(observation: torch.Tensor) -> torch.Tensor:
+            self.stop.check()
+            faults.point(phase)
+            if frames is not None:
+                frames.append(self.eval_gym_env.render())
+            if random:
+                action = self.random_action()
+            else:
+                action = self.agent.act(observation, step[0], explore=explore)
+            step[0] += 1
+            return action.to(torch.float32).cpu()
+
+        return TensorDictModule(act, in_keys=["observation"], out_keys=["action"])
+
+    def episode(self, env: TransformedEnv, seed: int, explore: bool, random: bool,
+                frames: list[np.ndarray] | None = None, phase: str = "acting") -> TensorDictBase:
+        self.agent.planner.reset()
+        env.set_seed(seed)
+        td = env.rollout(max_steps=10**9, policy=self.policy(explore, random, frames, phase),
+                         break_when_any_done=True, auto_reset=True)
+        if frames is not None:
+            frames.append(self.eval_gym_env.render())  # the final state
+        return td
+
+    def record_video(self) -> bool:
+        """Whether this evaluation writes a video (every ``video_every``-th, the first included)."""
+        train = self.options.train
+        return train.video and len(self.log.eval.rows()) % train.video_every == 0
+
+    def evaluate(self) -> None:
+        """TD-MPC's evaluation (planner without exploration noise), and the same start
+        states with the training noise: a policy that only works with noise shows here."""
+        frames: list[np.ndarray] | None = [] if self.record_video() else None
+
+        def returns(n: int, explore: bool) -> list[float]:
+            return [float(self.episode(self.eval_env, 10**6 + 1000 * self.options.seed + i,
+                                       explore=explore, random=False,
+                                       frames=frames if i == 0 and not explore else None,
+                                       phase="evaluation")["next", "reward"].sum())
+                    for i in range(n)]
+
+        plain = returns(self.options.train.eval_episodes, explore=False)
+        if frames:
+            write_video(self.run_dir / "videos" / f"eval_{self.state['env_step']:08d}.mp4", frames,
+                        frames_per_second(self.eval_gym_env, self.action_repeat))
+        noisy = returns(self.options.train.eval_noisy_episodes, explore=True)
+        self.state["last_eval_step"] = self.state["env_step"]
+        self.state["last_eval_reward"] = float(np.mean(plain))
+        self.log.log("eval", {
+            **self._counters(), "episode_reward": np.mean(plain),
+            "episode_reward_std": np.std(plain), "eval_episodes": len(plain),
+            "noisy_episode_reward": np.mean(noisy) if noisy else float("nan"),
+            "noisy_episode_reward_std": np.std(noisy) if noisy else float("nan"),
+            "noisy_eval_episodes": len(noisy)})
+
+    def _counters(self) -> dict[str, float]:
+        return {k: self.state[k] for k in ("env_step", "agent_step", "episode", "wall_time")}
+
+    def update(self, n: int) -> dict[str, float]:
+        """``n`` gradient updates on replayed slices; their metrics averaged."""
+        horizon = self.agent.config.horizon
+        totals: dict[str, float] = {}
+        for _ in range(n):
+            self.stop.check()
+            faults.point("update")
+            batch = sample_slices(self.buffer, horizon)
+            metrics, priority = self.agent.update(batch.select(*REPLAY_KEYS, "index",
+                                                               "priority_weight", strict=False))
+            update_priorities(self.buffer, batch, priority)
+            for k, v in metrics.items():
+                totals[k] = totals.get(k, 0.0) + v / n
+        return totals
+
+    def train(self) -> None:
+        cfg, state, seed = self.options.train, self.state, self.options.seed
+        bar = tqdm(total=cfg.steps, initial=state["env_step"], unit="step", disable=not cfg.progress,
+                   dynamic_ncols=True, desc="env steps")
+        if state["last_eval_step"] is None:
+            self.evaluate()
+        while state["env_step"] < cfg.steps:
+            start = time.perf_counter()
+            random = state["env_step"] < cfg.seed_steps
+            td = self.episode(self.env, 1000 * seed + state["episode"], explore=True, random=random)
+            length = td.shape[0]
+            td.set("episode", torch.full((length,), state["episode"], dtype=torch.int64))
+            self.buffer.extend(td.select(*REPLAY_KEYS))
+            state["episode"] += 1
+            state["agent_step"] += length
+            state["env_step"] += length * self.action_repeat
+            state["pending_updates"] += length * cfg.updates_per_step
+            metrics = {}
+            if state["env_step"] >= cfg.seed_steps:
+                metrics = self.update(state["pending_updates"])
+                metrics["updates"] = state["pending_updates"]
+                metrics["target_lag"] = self.agent.target_lag()
+                state["pending_updates"] = 0
+            elapsed = time.perf_counter() - start
+            state["wall_time"] += elapsed
+            self.log.log("train", {**self._counters(), **metrics,
+                                   "episode_reward": float(td["next", "reward"].sum()),
+                                   "steps_per_second": length * self.action_repeat / elapsed})
+            if (state["env_step"] - state["last_eval_step"] >= cfg.eval_every
+                    or state["env_step"] >= cfg.steps):
+                eval_start = time.perf_counter()
+                self.evaluate()
+                state["wall_time"] += time.perf_counter() - eval_start
+            if (state["env_step"] - state["last_checkpoint_step"] >= cfg.checkpoint_every
+                    or state["env_step"] >= cfg.steps):
+                state["last_checkpoint_step"] = state["env_step"]
+                checkpoint.save(self.run_dir, self.agent, self.buffer, state, self.checkpoint_options)
+            bar.update(length * self.action_repeat)
+            bar.set_postfix(eval_return=f"{state['last_eval_reward']:.1f}")
+        bar.close()

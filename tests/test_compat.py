@@ -1,0 +1,356 @@
+"""agents.compat against the installed dependencies: each adapter still reaches the
+private internal it wraps, and that internal still means what the project relies on.
+
+A failure names the dependency, its installed version and what changed: the fix
+belongs in ``agents/compat/<dependency>.py``, nowhere else.
+"""
+
+import contextlib
+import copy
+import warnings
+from collections import Counter
+from importlib.metadata import version
+
+import numpy as np
+import pytest
+import torch
+from escnn import group as escnn_group
+from escnn import gspaces
+from escnn import nn as enn
+from tensordict import TensorDict
+from tensordict.nn import TensorDictParams
+from torch import nn
+from torchrl.objectives import LossModule, SoftUpdate
+
+from agents.compat.escnn import (
+    BASIS_EXPANSION,
+    basis_blocks,
+    is_basis_expansion_key,
+    own_basis_expansion,
+)
+from agents.compat.torch import ConversionHook, TorchDispatchMode, child_modules, parameter_table
+from agents.compat.torchrl import (
+    expect_target_updater,
+    priority_state,
+    restore_priority_state,
+)
+from agents.tdmpc.replay import (
+    ReplayConfig,
+    load_replay,
+    make_replay_buffer,
+    save_replay,
+    update_priorities,
+)
+
+
+def changed(dependency: str, what: str) -> str:
+    return (f"{dependency} {version(dependency)}: {what} "
+            f"(the adapter to fix: agents/compat/{dependency}.py)")
+
+
+@contextlib.contextmanager
+def internal(dependency: str, what: str):
+    """Turn an internal that is gone (AttributeError, KeyError, ...) into a clear failure."""
+    try:
+        yield
+    except (AttributeError, KeyError, TypeError, IndexError) as err:
+        pytest.fail(changed(dependency, f"{what} is gone or changed shape ({err!r})"))
+
+
+# ----------------------------------------------------------------------------- torch
+
+
+class _EqualByValue(nn.Module):
+    """A module that hashes and compares by value, as escnn's basis modules do."""
+
+    def __eq__(self, other):
+        return isinstance(other, _EqualByValue)
+
+    def __hash__(self):
+        return 0
+
+
+def test_torch_child_modules():
+    parent = nn.Module()
+    a, b, c = _EqualByValue(), _EqualByValue(), nn.Linear(1, 1)
+    parent.a, parent.b = a, b
+    parent.register_module("empty", None)
+    parent.c = c
+    with internal("torch", "Module._modules"):
+        children = child_modules(parent)
+    assert [id(m) for m in children] == [id(a), id(b), id(c)], changed(
+        "torch", "Module._modules no longer lists the registered children, in order")
+    layer = enn.Linear(*_types("D4", ["regular"], ["regular"]))
+    assert any(m is layer.basisexpansion for m in child_modules(layer)), changed(
+        "torch", "Module._modules does not hold escnn's basis expansion")
+
+
+def test_torch_parameter_table():
+    torch.manual_seed(0)
+    lin = nn.Linear(3, 2)
+    original = lin.weight
+    x = torch.randn(4, 3)
+    with internal("torch", "Module._parameters"):
+        table = parameter_table(lin)
+        assert list(table) == ["weight", "bias"] and table["weight"] is original, changed(
+            "torch", "Module._parameters is not the module's name -> Parameter table")
+        table["weight"] = original.detach()
+    alias = lin.weight
+    assert alias is not original and not alias.requires_grad and alias.data_ptr() == original.data_ptr(), \
+        changed("torch", "a tensor written into Module._parameters is not what the module reads")
+    lin(x).sum().backward()
+    assert original.grad is None and lin.bias.grad is not None, changed(
+        "torch", "a forward after a write into Module._parameters does not use the written tensor")
+    table["weight"] = original
+    assert lin.weight is original and [p is original for p in lin.parameters()] == [True, False], \
+        changed("torch", "restoring a Parameter through Module._parameters does not restore it")
+
+
+class _Exact(ConversionHook):
+    def __init__(self):
+        super().__init__()
+        self.master = torch.tensor([0.1, 1 / 3], dtype=torch.float64)
+        self.register_buffer("value", self.master.float(), persistent=False)
+        self.calls = []
+
+    def converted(self):
+        self.calls.append(self.value.dtype)
+        self.register_buffer("value", self.master.to(self.value.dtype), persistent=False)
+
+
+def test_torch_conversion_hook():
+    m = _Exact()
+    parent = nn.Sequential(m)
+    with internal("torch", "Module._apply"):
+        parent.double()
+    assert m.calls == [torch.float64], changed(
+        "torch", "Module.double() no longer goes through Module._apply (or no longer "
+                 "converts the buffers before it returns)")
+    assert torch.equal(m.value, m.master), "the hook did not rebuild the buffer"
+    for convert in (lambda: m.float(), lambda: m.to(torch.float64), lambda: m.cpu(),
+                    lambda: m.to("cpu", torch.float32)):
+        convert()
+    assert m.calls == [torch.float64, torch.float32, torch.float64, torch.float64, torch.float32], \
+        changed("torch", ".float/.to/.cpu no longer all go through Module._apply")
+    assert "value" not in m.state_dict(), "the rebuilt buffer became persistent"
+
+
+def test_torch_dispatch_mode_counts_flops():
+    """What benchmarks/agent_speed.py does with it: torch's FLOP formulas per aten op."""
+    from torch.utils.flop_counter import flop_registry
+
+    class Count(TorchDispatchMode):
+        total = 0
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            out = func(*args, **(kwargs or {}))
+            formula = flop_registry.get(func.overloadpacket)
+            if formula is not None:
+                Count.total += formula(*args, out_val=out)
+            return out
+
+    a, b = torch.randn(3, 4), torch.randn(4, 5)
+    with internal("torch", "torch.utils._python_dispatch.TorchDispatchMode"), Count():
+        a @ b
+    assert Count.total == 2 * 3 * 4 * 5, changed(
+        "torch", "a TorchDispatchMode no longer sees aten.mm with its FLOP formula")
+
+
+# --------------------------------------------------------------------------- torchrl
+
+
+def _filled_buffer(seed=0, prioritized=True):
+    torch.manual_seed(seed)
+    buffer = make_replay_buffer(ReplayConfig(capacity=64, prioritized=prioritized), horizon=3,
+                                batch_size=4)
+    for episode, length in enumerate((10, 7, 12)):
+        buffer.extend(TensorDict({"observation": torch.randn(length, 2),
+                                  "episode": torch.full((length,), episode)}, [length]))
+    return buffer
+
+
+def test_torchrl_priority_state_round_trips_exactly(tmp_path):
+    buffer = _filled_buffer()
+    for _ in range(3):  # priorities of sampled slices, as the agent writes them
+        batch = buffer.sample().reshape(-1, 3)
+        update_priorities(buffer, batch, torch.rand(batch.shape[0]) * 5)
+    sampler, n = buffer.sampler, len(buffer)
+    with internal("torchrl", "PrioritizedSampler._sum_tree/_min_tree/_max_priority"):
+        state = priority_state(sampler, n)
+    public = sampler.state_dict()  # the whole trees, deep-copied: the public view
+    index = torch.arange(n)
+    assert torch.equal(torch.as_tensor(public["_sum_tree"][index]), state["sum"]) and torch.equal(
+        torch.as_tensor(public["_min_tree"][index]), state["min"]), changed(
+        "torchrl", "PrioritizedSampler._sum_tree/_min_tree differ from its state_dict's trees")
+    assert public["_max_priority"] == state["max"] and state["max"][0] is not None, changed(
+        "torchrl", "PrioritizedSampler._max_priority differs from its state_dict's")
+
+    save_replay(buffer, tmp_path / "replay.pt")
+    loaded = make_replay_buffer(ReplayConfig(capacity=64), horizon=3, batch_size=4)
+    load_replay(loaded, tmp_path / "replay.pt")
+    again = priority_state(loaded.sampler, n)
+    assert torch.equal(again["sum"], state["sum"]) and torch.equal(again["min"], state["min"]) \
+        and again["max"] == state["max"], changed("torchrl", "restored priorities differ")
+    assert loaded.writer.state_dict() == buffer.writer.state_dict(), changed(
+        "torchrl", "the writer's state_dict/load_state_dict no longer round-trip its cursor")
+    draws = []
+    for b in (buffer, loaded):
+        torch.manual_seed(1)
+        np.random.seed(1)  # TorchRL's prioritised sampling on CPU draws from numpy
+        sample = b.sample()
+        draws.append((sample["index"], sample["priority_weight"]))
+    assert torch.equal(draws[0][0], draws[1][0]) and torch.equal(draws[0][1], draws[1][1]), changed(
+        "torchrl", "a sampler restored from its priorities samples differently from the original")
+
+    fresh = make_replay_buffer(ReplayConfig(capacity=64), horizon=3, batch_size=4)
+    restore_priority_state(fresh.sampler, n, state)
+    assert fresh.sampler.state_dict()["_max_priority"] == state["max"], changed(
+        "torchrl", "writing PrioritizedSampler._max_priority does not set the sampler's maximum")
+
+
+def test_torchrl_expect_target_updater():
+    from torchrl._utils import rl_warnings
+
+    if not rl_warnings():
+        pytest.skip("RL_WARNINGS is off: TorchRL does not warn")
+
+    class Loss(LossModule):
+        def __init__(self):
+            super().__init__()
+            self.model = nn.Linear(2, 1)
+            self.model_params = TensorDict.from_module(self.model)
+            self.target_model_params = TensorDictParams(
+                TensorDict.from_module(copy.deepcopy(self.model).requires_grad_(False)),
+                no_convert=True)
+            expect_target_updater(self, "model")
+
+        def forward(self, td):
+            return TensorDict({"loss": self.model(td["x"]).sum()}, [])
+
+    td = TensorDict({"x": torch.randn(3, 2)}, [3])
+    with internal("torchrl", "LossModule._has_update_associated"):
+        loss = Loss()
+    with pytest.warns(UserWarning, match="No target network updater") as record:
+        loss(td)
+    assert record, changed("torchrl", "a loss awaiting its target updater no longer warns")
+    SoftUpdate(loss, tau=0.1)
+    with warnings.catch_warnings(record=True) as record:
+        warnings.simplefilter("always")
+        loss(td)
+    assert not [w for w in record if "target network updater" in str(w.message)], changed(
+        "torchrl", "SoftUpdate no longer clears LossModule._has_update_associated")
+
+
+# ----------------------------------------------------------------------------- escnn
+
+
+def _types(group: str, in_fields, out_fields):
+    """Field types of a 0-dimensional gspace: each field an irrep id, or "regular"."""
+    g = {"D4": escnn_group.dihedral_group(4), "C4": escnn_group.cyclic_group(4),
+         "SO2": escnn_group.so2_group(3)}[group]
+    space = gspaces.no_base_space(g)
+
+    def rep(field):
+        if field == "regular":
+            return g.regular_representation
+        return g.irrep(*field) if isinstance(field, tuple) else g.irrep(field)
+
+    return (enn.FieldType(space, [rep(f) for f in in_fields]),
+            enn.FieldType(space, [rep(f) for f in out_fields]))
+
+
+# (group, input fields, output fields): one pair; fields of a type interleaved with
+# others (not adjacent); several pairs; a continuous group's band-limited irreps.
+LAYERS = [
+    ("D4", ["regular"] * 3, ["regular"] * 2),
+    ("D4", [(0, 0), "regular", (1, 1), (0, 0)], ["regular", (1, 1), (0, 0), "regular"]),
+    ("C4", [0, 1, 1, "regular"], [2, "regular", 1]),
+    ("SO2", [0, 1, 2, 1], [1, 0, 2]),
+]
+
+
+@pytest.mark.parametrize("spec", LAYERS, ids=[f"{g}-{i}" for i, (g, *_) in enumerate(LAYERS)])
+def test_escnn_basis_blocks_describe_the_weights(spec):
+    torch.manual_seed(0)
+    layer = enn.Linear(*_types(*spec))
+    expansion = layer.basisexpansion
+    with internal("escnn", "BlocksBasisExpansion._representations_pairs/_weights_ranges/"
+                           "block_expansion_<_escape_pair> submodules"):
+        blocks = basis_blocks(expansion)
+    in_reprs, out_reprs = layer.in_type.representations, layer.out_type.representations
+    in_count, out_count = Counter(r.name for r in in_reprs), Counter(r.name for r in out_reprs)
+
+    stops = [0] + [b.weights[1] for b in blocks]
+    assert [b.weights[0] for b in blocks] == stops[:-1] and stops[-1] == expansion.dimension() \
+        == layer.weights.numel(), changed("escnn", "the pairs' _weights_ranges no longer tile "
+                                                   "the weight vector in _representations_pairs order")
+    for b in blocks:
+        size = b.sampled_basis.shape[0] * in_count[b.in_name] * out_count[b.out_name]
+        assert b.weights[1] - b.weights[0] == size, changed(
+            "escnn", f"pair {b.in_name}->{b.out_name}: its range is not n_out x n_in x basis")
+
+    # The layout against escnn's public per-coefficient description.
+    info = list(expansion.get_basis_info())
+    in_fields = {name: [i for i, r in enumerate(in_reprs) if r.name == name] for name in in_count}
+    out_fields = {name: [o for o, r in enumerate(out_reprs) if r.name == name] for name in out_count}
+    for b in blocks:
+        n_in, dim = in_count[b.in_name], b.sampled_basis.shape[0]
+        for k in range(b.weights[0], b.weights[1]):
+            o, rest = divmod(k - b.weights[0], n_in * dim)
+            attr = info[k]
+            assert (attr["in_repr"], attr["out_repr"]) == (b.in_name, b.out_name) and (
+                attr["out_field_position"], attr["in_field_position"]) == (
+                out_fields[b.out_name][o], in_fields[b.in_name][rest // dim]), changed(
+                "escnn", f"coefficient {k} is not where the private layout puts it "
+                         f"(get_basis_info says {attr['in_repr']}->{attr['out_repr']})")
+
+    # The layout against escnn's own expansion: rebuild the matrix from the blocks.
+    weights = torch.randn(expansion.dimension())
+    expected = expansion(weights)[..., 0]
+    in_channels = {name: [] for name in in_count}
+    out_channels = {name: [] for name in out_count}
+    for reprs, channels in ((in_reprs, in_channels), (out_reprs, out_channels)):
+        start = 0
+        for r in reprs:
+            channels[r.name].extend(range(start, start + r.size))
+            start += r.size
+    rebuilt = torch.zeros_like(expected)
+    for b in blocks:
+        basis = b.sampled_basis[..., 0]  # [basis, out_size, in_size]
+        n_out, n_in = out_count[b.out_name], in_count[b.in_name]
+        coefficients = weights[b.weights[0]:b.weights[1]].view(n_out, n_in, -1)
+        block = torch.einsum("oib,bpq->opiq", coefficients, basis).reshape(
+            n_out * basis.shape[1], n_in * basis.shape[2])
+        rows, cols = out_channels[b.out_name], in_channels[b.in_name]
+        rebuilt[torch.tensor(rows)[:, None], torch.tensor(cols)[None, :]] = block
+    assert torch.allclose(rebuilt, expected, atol=1e-6), changed(
+        "escnn", "the blocks' bases and ranges no longer rebuild BlocksBasisExpansion's matrix")
+
+
+def test_escnn_own_basis_expansion():
+    types = _types("D4", ["regular"] * 2, ["regular"] * 2)
+    a, b = enn.Linear(*types), enn.Linear(*types)
+    shared = a.basisexpansion
+    with internal("escnn", "Linear._basisexpansion"):
+        own_basis_expansion(a)
+    assert a.basisexpansion is not shared and a.basisexpansion == shared, changed(
+        "escnn", "Linear.basisexpansion does not read the attribute own_basis_expansion writes")
+    assert any(m is a.basisexpansion for m in child_modules(a)), changed(
+        "escnn", "the copied basis expansion is not registered as the layer's submodule")
+    ours = {t.data_ptr() for t in a.basisexpansion.buffers()}
+    assert ours and not ours & {t.data_ptr() for t in b.basisexpansion.buffers()}, \
+        "the copy shares buffers with another layer"
+    a.double()
+    assert all(t.dtype == torch.float32 for t in b.basisexpansion.buffers() if t.is_floating_point())
+    assert torch.equal(a.expand_parameters()[0], a.basisexpansion(a.weights)[..., 0]), changed(
+        "escnn", "Linear.expand_parameters no longer uses the module behind basisexpansion")
+
+
+def test_escnn_basis_expansion_key():
+    layer = enn.Linear(*_types("D4", ["regular", (0, 0)], ["regular", (1, 1)]))
+    names = [name for name, m in layer.named_children() if m is layer.basisexpansion]
+    assert names == [BASIS_EXPANSION], changed(
+        "escnn", f"Linear's basis expansion is registered as {names}, not {BASIS_EXPANSION!r}")
+    keys = layer.state_dict()
+    flagged = {k for k in keys if is_basis_expansion_key(k)}
+    assert flagged and flagged == {k for k in keys if k.startswith(BASIS_EXPANSION + ".")}
