@@ -163,6 +163,12 @@ def test_sweep_directories_stay_short_and_the_launcher_uses_one_process_per_core
     assert len(name) <= 120 and name != sweep_dirname(long + "x")
     assert sweep_dirname("seed=1,agent.group=D8") == "seed=1,agent.group=D8"
     assert "/" not in sweep_dirname("env.id=GeoMDP/PointMass2D-v0")
+    # Hydra sorts the overrides (seed last); a shortened name keeps every swept value
+    sweep = ",".join([f"agent.networks.option{i}=value{i}" for i in range(6)]
+                     + ["agent.group=icosahedral", "env.target_size=0.02", "seed=3"])
+    short = sweep_dirname(sweep)
+    assert len(short) <= 120 and short.startswith("seed=3,") and ",icosahedral," in short
+    assert all(f"value{i}" in short for i in range(6)) and short != sweep_dirname(sweep[:-1] + "4")
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
         cfg = compose("train", return_hydra_config=True)
     assert cfg.hydra.launcher.n_jobs == usable_cores()
@@ -191,3 +197,34 @@ def test_a_checkpoint_whose_rebuilt_bases_differ_is_refused(tmp_path, capsys, ag
     assert run(config("env=pointmass3d", *agent, "train.steps=2000"), tmp_path) == 2
     err = capsys.readouterr().err
     assert "escnn rebuilt a different basis" in err
+
+
+@pytest.mark.parametrize("layers, buffer", [("dense", "_basis0"), ("fourier", "fourier_in")])
+def test_fingerprints_follow_the_rebuilt_bases(layers, buffer):
+    """The fingerprints are the layers' maps on a probe, applied by their own forward
+    (not by expanding the weights, which made saving a paper-preset D8 checkpoint take
+    seconds): the same bases load, a different basis of either layer kind is refused."""
+    import gymnasium
+
+    from agents.nn.fourier import FourierLinear
+    from agents.nn.layers import EquivariantLinear
+    from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
+
+    sym = gymnasium.make("GeoMDP/PointMass2D-v0").unwrapped.symmetry
+    cfg = TDMPCConfig.from_dict({"group": "D4", "width_strategy": "sqrt", "batch_size": 8,
+                                 "horizon": 3, "networks": {"hidden_dim": 32, "latent_dim": 16,
+                                                            "layers": layers}})
+
+    def agent():
+        return TDMPCAgent(cfg, sym, sym.observation_size, sym.action_size, seed=0)
+
+    saved = agent().state_dict()
+    agent().load_state_dict(saved)  # rebuilt the same: accepted
+    changed = agent()
+    kind = EquivariantLinear if layers == "dense" else FourierLinear
+    name, layer = next((n, m) for n, m in changed.model.named_modules() if isinstance(m, kind))
+    assert name in saved["basis_fingerprints"]
+    with torch.no_grad():
+        getattr(layer, buffer).neg_()
+    with pytest.raises(ValueError, match=f"escnn rebuilt a different basis .*for {name} "):
+        changed.load_state_dict(saved)

@@ -124,6 +124,25 @@ def test_sigterm_stops_at_a_safe_point_with_one_line(tmp_path):
     assert finished.returncode == 0, finished.stderr[-2000:]
 
 
+def test_a_second_signal_while_stopping_exits_130(tmp_path):
+    """SIGTERM, then another while the process is stopping or shutting down (as a
+    supervisor that repeats its signal does): the status stays 130, never 143."""
+    for pause in (0.0, 0.5, 1.5):
+        run_dir = tmp_path / f"pause{pause}"
+        proc = subprocess.Popen([*TRAIN, *TINY, "train.steps=4000", f"hydra.run.dir={run_dir}"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        deadline = time.time() + 180
+        while not (run_dir / "eval.csv").exists():  # training (signal handlers installed)
+            assert proc.poll() is None and time.time() < deadline, proc.communicate()
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        time.sleep(pause)
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == 130, (pause, proc.returncode, err[-1000:])
+
+
 def test_corrupted_checkpoint_is_reported_and_kept(tmp_path, capsys):
     assert run(config(), tmp_path) == 0
     agent_file = tmp_path / "checkpoint/agent.pt"

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from agents.options import OptionError
@@ -57,7 +58,7 @@ MAX_DIRNAME = 120
 def sweep_dirname(overrides: str) -> str:
     """A multirun job's directory name: its overrides (``a.b=1,seed=2``), or, when that is
     too long for the filesystem, the swept values kept readable: keys shortened to their
-    last part, then values only (``seed`` first), and a hash of the whole list so that
+    last part, then values only (but ``seed=``, which comes first), and a hash of the whole list so that
     two jobs never share a directory."""
     name = overrides.replace("/", "-") or "default"
     if len(name) <= MAX_DIRNAME:
@@ -67,7 +68,7 @@ def sweep_dirname(overrides: str) -> str:
     pairs.sort(key=lambda p: p[0] != "seed")  # stable: seed first, the rest as Hydra sorted them
     room = MAX_DIRNAME - len(digest) - 1
     for short in (",".join(f"{k.rsplit('.', 1)[-1]}={v}" for k, _, v in pairs),
-                  ",".join(v for _, _, v in pairs)):
+                  ",".join(f"{k}={v}" if k == "seed" else v for k, _, v in pairs)):
         if len(short) <= room:
             return f"{short}_{digest}"
     width = max(1, room // len(pairs) - 1)  # every value cut to the same width
@@ -125,10 +126,13 @@ def run(cfg: DictConfig, run_dir: Path, hydra_records: tuple[DictConfig, DictCon
         with RunDirLock(run_dir):
             check_same_options(run_dir, options.resolved)
             write_records(run_dir, options.resolved, *(hydra_records or ()))
-            trainer = Trainer(options, run_dir, build_parts(options, task),
-                              RunLog(run_dir, options.logger.tensorboard), stop)
-            trainer.restore()
-            trainer.train()
+            log = RunLog(run_dir, options.logger.tensorboard)
+            try:
+                trainer = Trainer(options, run_dir, build_parts(options, task), log, stop)
+                trainer.restore()
+                trainer.train()
+            finally:
+                log.close()
     except (OptionError, checkpoint.CheckpointError, RunLogError) as err:
         print(f"geomdp-train: error: {err}", file=sys.stderr)
         return 1 if isinstance(err, (RunDirError, checkpoint.CheckpointWriteError)) else 2
@@ -148,6 +152,11 @@ def hydra_main(cfg: DictConfig) -> None:
     hydra_cfg = HydraConfig.get()
     status = run(cfg, Path(hydra_cfg.runtime.output_dir),
                  (cfg, hydra_cfg, list(hydra_cfg.overrides.task)))
+    if status == 130 and hydra_cfg.mode == RunMode.RUN:  # not a multirun's worker
+        # Interrupted, with everything saved and the logs closed: leave now. Python's own
+        # shutdown restores the default signal actions first, so a second signal during
+        # it (a supervisor repeating SIGTERM) would end the process with 143 instead.
+        _exit_interrupted(signal.SIGTERM, None)
     if status:
         sys.exit(status)
 

@@ -141,6 +141,13 @@ class RunLog:
                 path.write_text("".join(kept))
         return self.eval.truncate_after(env_step) + self.train.truncate_after(env_step)
 
+    def close(self) -> None:
+        """Flush what TorchRL's loggers buffer (TensorBoard's event files)."""
+        for logger in self.loggers:
+            close = getattr(logger.experiment, "close", None)
+            if isinstance(logger, TensorboardLogger) and close is not None:
+                close()
+
     def log(self, table: str, row: dict[str, float]) -> None:
         getattr(self, table).append(row)
         for logger in self.loggers:

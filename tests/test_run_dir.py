@@ -1,0 +1,42 @@
+"""The run directory: one process at a time, and records that show only options the
+run really used."""
+
+import subprocess
+import sys
+
+from test_train import TINY, TRAIN, config
+
+from agents.cli.train import run
+from agents.run.run_dir import RunDirLock
+
+
+def test_a_second_process_on_a_run_directory_is_refused_in_one_line(tmp_path, capsys):
+    """While one geomdp-train holds the directory, another is refused before it writes
+    a row (two processes used to run to the end, interleaving eval.csv)."""
+    with RunDirLock(tmp_path):  # flock: a second open file conflicts, even in this process
+        assert run(config(), tmp_path) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is in use by another geomdp-train (pid " in err[0], err
+    assert not (tmp_path / "eval.csv").exists() and not (tmp_path / "config.yaml").exists()
+    assert run(config("train.steps=1000"), tmp_path) == 0  # released: the next one runs
+
+
+def test_a_refused_resume_leaves_the_runs_records_untouched(tmp_path):
+    args = [*TINY, "train.steps=1000", f"hydra.run.dir={tmp_path}"]
+    first = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr[-2000:]
+    records = {p: p.read_bytes() for p in [tmp_path / "config.yaml",
+                                           *(tmp_path / ".hydra").glob("*.yaml")]}
+    assert {p.name for p in records} == {"config.yaml", "hydra.yaml", "overrides.yaml"}
+    assert "train.steps=1000" in (tmp_path / ".hydra" / "overrides.yaml").read_text()
+    refused = subprocess.run([*TRAIN, *args, "agent.group=D4"], capture_output=True, text=True,
+                             timeout=300)
+    assert refused.returncode == 2 and "agent.group: 'none' -> 'D4'" in refused.stderr
+    assert {p: p.read_bytes() for p in records} == records
+
+
+def test_the_cli_writes_records_only_for_an_accepted_run(tmp_path):
+    out = subprocess.run([sys.executable, "-c", "from agents.cli.train import main; main()",
+                          "train.steps=abc", f"hydra.run.dir={tmp_path / 'run'}"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and not (tmp_path / "run").exists()
