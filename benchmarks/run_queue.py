@@ -42,7 +42,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 LOG_FILES_SKIPPED = ("checkpoint", "checkpoint.tmp", "checkpoint.old", ".geomdp-write-test",
-                     "run_queue.pid")
+                     "run_queue.pid", "run.lock")
 PID_FILE = "run_queue.pid"  # the trainer's process id while a queue runs it
 STARTUP_MINUTES = 1.0  # building the agent and the first evaluation's set-up, per start
 
