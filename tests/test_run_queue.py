@@ -192,3 +192,26 @@ def test_worktree_must_be_the_pinned_commit(repo: Path) -> None:
         rq.pinned_worktree(repo, commit, worktree)
     with pytest.raises(rq.PlanError, match="not a commit"):
         rq.pinned_worktree(repo, "no-such-commit", None)
+
+
+def test_every_plan_line_is_a_valid_run():
+    """The committed plans compose and pass every option check with this code (a typo
+    would otherwise surface hours into a queue)."""
+    import warnings
+
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from agents.cli.train import CONFIG_DIR
+    from agents.run.config import RunOptions, check_task
+
+    plans = sorted((Path(__file__).resolve().parent.parent / "benchmarks" / "plans").glob("*.txt"))
+    assert plans
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"), \
+            warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # approximate groups warn (D8 on PointMass2D)
+        runs = {(run.steps, *sorted(o for o in run.overrides if not o.startswith("seed=")))
+                for plan in plans for run in rq.read_plan(plan.read_text())}
+        for steps, *overrides in sorted(runs):  # seeds aside: the same checks
+            cfg = compose("train", overrides=[*overrides, f"train.steps={steps}"])
+            check_task(RunOptions.from_config(OmegaConf.to_container(cfg, resolve=True)))

@@ -64,11 +64,12 @@ def test_same_seed_gives_the_same_eval_csv(tmp_path):
 AGENTS = {"plain": [], "D8": ["agent.group=D8"],
           "octahedral-pointmass3d": ["env=pointmass3d", "agent.group=octahedral"],
           "SO3-pointmass3d": ["env=pointmass3d", "agent.group=SO3"],
-          "O2-reacher": ["env=reacher", "agent.group=O2"]}
+          "O2-reacher": ["env=reacher", "agent.group=O2"],
+          "plain-augmented": ["agent.augment=auto"]}
 KILLS = [("plain", "seeding:100"), ("plain", "evaluation:200"), ("plain", "checkpoint_write:1"),
          ("plain", "checkpoint_cleanup:2"), ("D8", "update:100"), ("D8", "checkpoint_swap:1"),
          ("octahedral-pointmass3d", "update:60"), ("SO3-pointmass3d", "update:60"),
-         ("O2-reacher", "checkpoint_swap:1")]
+         ("O2-reacher", "checkpoint_swap:1"), ("plain-augmented", "update:100")]
 
 
 @pytest.fixture(scope="module")

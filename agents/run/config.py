@@ -18,6 +18,7 @@ from agents.options import OptionError, check, from_dict, option
 from agents.run.envs import TASK_ENVS, declared_symmetry, make_gym_env
 from agents.run.nested import flatten
 from agents.tdmpc.agent import TDMPCConfig
+from agents.tdmpc.augmentation import augmentation_group
 from geomdp_envs.symmetry import Symmetry
 
 # Options that may change when a run is continued (budgets and display), and the rest must not.
@@ -132,6 +133,8 @@ def check_task(options: RunOptions) -> Task:
     task = Task(declared_symmetry(env), env.observation_space.shape[0], env.action_space.shape[0])
     env.close()
     agent = options.agent
+    if agent.augment != "none":
+        augmentation_group(agent.augment, task.symmetry)
     if agent.group is not None:
         if task.symmetry is None:
             raise OptionError(f"agent.group={agent.group} needs a task that declares its symmetry "

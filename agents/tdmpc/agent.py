@@ -14,6 +14,7 @@ from agents.nn.layers import expansion_scope
 from agents.nn.networks import Architecture, Equivariance, NetworkConfig, build_networks
 from agents.nn.spectral import GridActivation
 from agents.options import OptionError, check, from_dict, key, option
+from agents.tdmpc.augmentation import SliceAugmentation
 from agents.tdmpc.loss import LossConfig, TDMPCLoss
 from agents.tdmpc.planner import MPPIPlanner, NoiseSource, PlannerConfig
 from agents.tdmpc.replay import ReplayConfig
@@ -70,6 +71,9 @@ class TDMPCConfig(Equivariance):
     tau: float = option(0.01, low=0, low_open=True, high=1)
     target_update_every: int = option(2, low=1)
     grad_clip_norm: float = option(10.0, low=0, low_open=True)
+    # Replayed slices moved by a random element of a symmetry group (agents.tdmpc.augmentation):
+    # none | auto (the largest exact group that keeps actions in their domain) | a subgroup of it
+    augment: str = "none"
 
     def __post_init__(self) -> None:
         Equivariance.__post_init__(self)
@@ -120,6 +124,8 @@ class TDMPCAgent:
         self.noise = NoiseSource(self.generator)
         self.updates = 0
         self.horizon_schedule = Schedule(1, config.horizon, config.horizon_schedule)
+        self.augmentation = (None if config.augment == "none"
+                             else SliceAugmentation(config.augment, symmetry, seed))
 
     def horizon(self, step: int) -> int:
         return int(round(self.horizon_schedule(step)))
@@ -136,7 +142,10 @@ class TDMPCAgent:
 
     def update(self, batch: TensorDictBase) -> tuple[dict[str, float], torch.Tensor]:
         """One gradient step on a [batch, horizon] TensorDict. Returns the losses and
-        health metrics, and each slice's new replay priority (TD-MPC's TD error)."""
+        health metrics, and each slice's new replay priority (TD-MPC's TD error). With
+        ``agent.augment``, the slices are moved by random group elements first."""
+        if self.augmentation is not None:
+            batch = self.augmentation(batch)
         losses = self.loss(batch.to(self.device))
         self.model_optimizer.zero_grad(set_to_none=True)
         self.policy_optimizer.zero_grad(set_to_none=True)
@@ -193,7 +202,9 @@ class TDMPCAgent:
         return {"loss": networks, "basis_fingerprints": self.basis_fingerprints(),
                 "model_optimizer": self.model_optimizer.state_dict(),
                 "policy_optimizer": self.policy_optimizer.state_dict(),
-                "generator": self.generator.get_state(), "updates": self.updates}
+                "generator": self.generator.get_state(), "updates": self.updates,
+                **({} if self.augmentation is None
+                   else {"augmentation_generator": self.augmentation.generator.get_state()})}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         missing, unexpected = self.loss.load_state_dict(state["loss"], strict=False)
@@ -211,5 +222,7 @@ class TDMPCAgent:
         self.model_optimizer.load_state_dict(state["model_optimizer"])
         self.policy_optimizer.load_state_dict(state["policy_optimizer"])
         self.generator.set_state(state["generator"])
+        if self.augmentation is not None:
+            self.augmentation.generator.set_state(state["augmentation_generator"])
         self.updates = state["updates"]
         self.planner.reset()
