@@ -40,3 +40,23 @@ def test_the_cli_writes_records_only_for_an_accepted_run(tmp_path):
                           "train.steps=abc", f"hydra.run.dir={tmp_path / 'run'}"],
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2 and not (tmp_path / "run").exists()
+
+
+def test_constructing_a_trainer_writes_nothing(tmp_path):
+    """The trainer receives its parts; only ``restore()`` touches the run directory."""
+    from omegaconf import OmegaConf
+
+    from agents.run.config import RunOptions, check_task
+    from agents.run.run_log import RunLog
+    from agents.run.trainer import Trainer, build_parts
+
+    options = RunOptions.from_config(OmegaConf.to_container(config(), resolve=True))
+    (tmp_path / "logs").mkdir()
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    trainer = Trainer(options, run_dir, build_parts(options, check_task(options)),
+                      RunLog(tmp_path / "logs"))
+    assert list(run_dir.iterdir()) == []
+    assert trainer.restore() == 0  # no checkpoint: a new run, its session recorded
+    assert (tmp_path / "logs" / "sessions.csv").read_text().count("\n") == 2
+    assert list(run_dir.iterdir()) == []
