@@ -73,6 +73,24 @@ def test_plot_handles_unequal_and_unfinished_runs(tmp_path, capsys):
     assert set(plot.group_runs(found, ("agent.layers",))) == {"group=none", "group=D8"}
 
 
+def test_plot_pairs_runs_by_seed(tmp_path, capsys):
+    for seed, (plain, d8) in enumerate([([0, 100, 200], [0, 500, 900]),
+                                        ([0, 0, 100], [0, 300, 700]),
+                                        ([0, 400, 800], [0, 400, 800])], start=1):
+        write_run(tmp_path / f"none/{seed}", "none", seed, plain)
+        write_run(tmp_path / f"D8/{seed}", "D8", seed, d8)
+    write_run(tmp_path / "D8/4", "D8", 4, [0, 1000, 1000])  # no plain seed 4: not paired
+    plot.main([str(tmp_path), "--paired", "group=none"])
+    out = capsys.readouterr().out
+    row = next(line for line in out.splitlines() if line.startswith("| group=D8 − group=none"))
+    # mean over evaluations: seed 1 +366.7, seed 2 +300.0, seed 3 0
+    assert "| 3 | 1: +366.7, 2: +300.0, 3: +0.0 | +222.2 [" in row and "| 2 of 3 |" in row
+    p = float(row.split("|")[5])
+    assert 0.05 < p < 0.2  # scipy's paired t-test on (366.7, 300, 0)
+    with pytest.raises(SystemExit, match="--paired 'group=C4' is not a group"):
+        plot.main([str(tmp_path), "--paired", "group=C4"])
+
+
 def test_plot_title_defaults_to_the_folder_the_runs_share(tmp_path):
     runs = [tmp_path / "sweep" / agent / "seed1" for agent in ("plain", "D8")]
     assert plot.default_title(runs) == "sweep"

@@ -11,7 +11,8 @@ length, or still in progress, are fine: at each evaluation step, the seeds
 that have reached it are used. Prints a markdown table of final returns (mean
 with 95% CI, IQM), of each seed's mean return over its evaluations (the area
 under its curve: sample efficiency; compare runs of equal length) and of the
-environment steps each seed took to reach ``--threshold``.
+environment steps each seed took to reach ``--threshold``; with ``--paired GROUP``,
+every group against that one seed by seed (differences, bootstrap CI, paired t-test).
 """
 
 from __future__ import annotations
@@ -129,6 +130,41 @@ def table(groups: dict[str, list[Run]], threshold: float | None) -> str:
     return "\n".join(rows)
 
 
+def paired_table(groups: dict[str, list[Run]], baseline: str) -> str:
+    """Every group against ``baseline``, seed by seed (runs of the same seed pair): the
+    per-seed differences of the mean return over all evaluations (the area under the
+    curve) and of the final return, their mean with a 95% bootstrap CI, a paired t-test
+    and on how many seeds the group did better. Only seeds both groups have count."""
+    if baseline not in groups:
+        raise SystemExit(f"geomdp-plot: error: --paired {baseline!r} is not a group; groups: "
+                         f"{', '.join(groups)}")
+    base = {r.options.get("seed"): r for r in groups[baseline]}
+    rows = ["| comparison | seeds | per-seed difference, mean return over all evaluations "
+            "| mean difference (95% CI) | paired t-test p | better on | final return: mean "
+            "difference (95% CI), p |", "|---|---|---|---|---|---|---|"]
+    for label, runs in groups.items():
+        if label == baseline:
+            continue
+        pairs = sorted((r.options.get("seed"), r, base[r.options.get("seed")]) for r in runs
+                       if r.options.get("seed") in base)
+        if not pairs:
+            continue
+        area = np.array([a.returns.mean() - b.returns.mean() for _, a, b in pairs])
+        final = np.array([a.returns[-1] - b.returns[-1] for _, a, b in pairs])
+
+        def p_value(d: np.ndarray) -> str:
+            if len(d) < 2 or np.all(d == d[0]):
+                return "–"
+            return f"{stats.ttest_1samp(d, 0.0).pvalue:.3f}"
+
+        per_seed = ", ".join(f"{seed}: {d:+.1f}" for (seed, _, _), d in zip(pairs, area))
+        rows.append(f"| {label} − {baseline} | {len(pairs)} | {per_seed} | "
+                    "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(area))
+                    + f" | {p_value(area)} | {int((area > 0).sum())} of {len(pairs)} | "
+                    + "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(final)) + f", {p_value(final)} |")
+    return "\n".join(rows)
+
+
 def plot(groups: dict[str, list[Run]], out: Path, title: str,
          references: list[tuple[float, str]]) -> None:
     import matplotlib
@@ -176,6 +212,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--ignore", action="append", default=[],
                         help="an option not to group runs by (e.g. one added later with a "
                              "default that changes nothing: agent.networks.layers)")
+    parser.add_argument("--paired", metavar="GROUP", default=None,
+                        help="also compare every group with this one seed by seed "
+                             "(a label of the table, e.g. 'group=none')")
     args = parser.parse_args(argv)
     runs = [r for r in find_runs(args.paths) if args.complete is None or r.steps[-1] >= args.complete]
     if not runs:
@@ -189,6 +228,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.out:
         plot(groups, args.out, args.title or default_title(args.paths), references)
     text = table(groups, args.threshold)
+    if args.paired is not None:
+        text += "\n\n" + paired_table(groups, args.paired)
     print(text)
     if args.markdown:
         args.markdown.write_text(text + "\n")
