@@ -2,7 +2,9 @@
 
 Layers, bottom up: ``agents.nn`` (groups, equivariant layers, networks),
 ``agents.tdmpc`` (world model, loss, planner, replay, the agent),
-``agents.run`` (options, trainer, checkpoints, logs) and ``agents.cli`` (the
+``agents.run`` (a run's options, trainer, checkpoints, logs), ``agents.options`` (the
+validator every option is declared for), ``agents.compat`` (dependency internals) and
+``agents.cli`` (the
 ``geomdp-train``, ``geomdp-plot`` and ``geomdp-theory`` commands).
 """
 

@@ -108,8 +108,13 @@ def check(instance: Any) -> None:
     cls = type(instance)
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(instance):
+        if not f.init:
+            continue
         value = getattr(instance, f.name)
         if dataclasses.is_dataclass(hints[f.name]):
+            if not isinstance(value, hints[f.name]):
+                raise OptionError(f"{key(cls, f.name)} must be of type {hints[f.name].__name__}, "
+                                  f"got {value!r}")
             continue  # checked by its own __post_init__
         name = key(cls, f.name)
         _check_type(name, hints[f.name], value)
@@ -126,7 +131,7 @@ def from_dict(cls: type[T], data: Mapping[str, Any]) -> T:
     if not isinstance(data, Mapping):
         raise OptionError(f"{getattr(cls, 'KEY', cls.__name__)} must be a mapping, got {data!r}")
     hints = typing.get_type_hints(cls)
-    names = {f.name for f in dataclasses.fields(cls)}
+    names = {f.name for f in dataclasses.fields(cls) if f.init}
     kwargs = {}
     for name, value in data.items():
         if name not in names:
@@ -138,7 +143,8 @@ def from_dict(cls: type[T], data: Mapping[str, Any]) -> T:
         else:
             _check_type(key(cls, name), hints[name], value)  # before __post_init__ compares
         kwargs[name] = value
-    try:
-        return cls(**kwargs)
-    except TypeError as err:  # a dataclass that takes its fields differently
-        raise OptionError(f"{getattr(cls, 'KEY', cls.__name__)}: {err}") from None
+    required = [f.name for f in dataclasses.fields(cls) if f.init and f.name not in kwargs
+                and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    if required:
+        raise OptionError(f"{key(cls, required[0])} is required (no default)")
+    return cls(**kwargs)

@@ -186,10 +186,14 @@ def session_problems(run_dir: Path, commit: str) -> list[str]:
 
 
 def copy_logs(src: Path, dest: Path) -> None:
-    """The run's logs, without its checkpoints, replace ``dest``."""
+    """The run's logs, without its checkpoints, replace ``dest``: copied beside it first,
+    so that an interrupted copy never leaves a ``dest`` that looks finished."""
+    partial = dest.with_name(dest.name + ".copying")
+    shutil.rmtree(partial, ignore_errors=True)
+    shutil.copytree(src, partial, ignore=shutil.ignore_patterns(*LOG_FILES_SKIPPED))
     if dest.exists():
         shutil.rmtree(dest)
-    shutil.copytree(src, dest, ignore=shutil.ignore_patterns(*LOG_FILES_SKIPPED))
+    partial.rename(dest)
 
 
 def git(repo: Path, *args: str) -> subprocess.CompletedProcess[str]:
@@ -305,11 +309,17 @@ class Queue:
         return None
 
     def collect_finished_work(self) -> None:
-        """Runs finished in the worktree whose logs are not yet in results/ (the queue
-        stopped between the two) are collected first."""
+        """What a queue stopped half-way left: runs finished in the worktree whose logs
+        are not yet in results/ are collected, and collected logs not yet committed are
+        committed."""
         for run in self.runs:
             if not finished(run, self.repo) and logged_step(run.work) >= run.steps:
                 self.collect(run)
+            elif (self.commit_results and finished(run, self.repo)
+                  and git(self.repo, "status", "--porcelain", "--", run.dest).stdout.strip()):
+                outcome = commit_results(self.repo, run.dest, f"Run queue: {run.dest} finished "
+                                         f"({run.steps} env steps, code {self.commit[:10]})")
+                say(f"committed the logs of {run.dest} a stopped queue had left: {outcome}")
 
     def start(self, run: Run) -> None:
         run.work.mkdir(parents=True, exist_ok=True)
@@ -330,8 +340,11 @@ class Queue:
             out.write(f"run_queue {dt.datetime.now():%Y-%m-%d %H:%M:%S}: {how}, "
                       f"commit {self.commit[:10]}\n")
             out.flush()
+            # A session of its own: Ctrl-C on the queue reaches the trainers only through
+            # stop_all's one SIGTERM (a second signal would stop them without their
+            # safe point).
             proc = subprocess.Popen(run.argv(self.python, self.module), cwd=self.worktree,
-                                    stdout=out, stderr=subprocess.STDOUT,
+                                    stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
                                     env={**os.environ, "OMP_NUM_THREADS": "1",
                                          "MKL_NUM_THREADS": "1"})
         (run.work / PID_FILE).write_text(str(proc.pid))

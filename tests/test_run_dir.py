@@ -35,6 +35,23 @@ def test_a_refused_resume_leaves_the_runs_records_untouched(tmp_path):
     assert {p: p.read_bytes() for p in records} == records
 
 
+def test_a_run_made_before_an_option_existed_resumes(tmp_path):
+    """A run directory and checkpoint from before ``agent.augment`` existed resume
+    (the option's no-op default is filled in: ``agents.run.nested.ADDED_LATER``)."""
+    import json
+
+    import yaml
+
+    assert run(config("train.steps=1000"), tmp_path) == 0
+    saved = yaml.safe_load((tmp_path / "config.yaml").read_text())
+    del saved["agent"]["augment"]
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(saved))
+    manifest = json.loads((tmp_path / "checkpoint/manifest.json").read_text())
+    del manifest["options"]["agent.augment"]
+    (tmp_path / "checkpoint/manifest.json").write_text(json.dumps(manifest))
+    assert run(config("train.steps=2000"), tmp_path) == 0
+
+
 def test_the_cli_writes_records_only_for_an_accepted_run(tmp_path):
     out = subprocess.run([sys.executable, "-c", "from agents.cli.train import main; main()",
                           "train.steps=abc", f"hydra.run.dir={tmp_path / 'run'}"],

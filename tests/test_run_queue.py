@@ -20,14 +20,16 @@ sys.modules["run_queue"] = rq
 SPEC.loader.exec_module(rq)
 
 # A trainer with geomdp-train's contract: resumes from checkpoint/state.json, logs
-# eval.csv/train.csv/sessions.csv, checkpoints every step, exits 130 on SIGTERM.
+# eval.csv/train.csv/sessions.csv, checkpoints every step (atomically), and on SIGTERM
+# stops at its next safe point with exit status 130.
 FAKE_TRAIN = textwrap.dedent('''
     import json, os, signal, subprocess, sys, time
     from pathlib import Path
     opts = dict(a.split("=", 1) for a in sys.argv[1:])
     run_dir, steps = Path(opts["hydra.run.dir"]), int(opts["train.steps"])
     delay = float(opts.get("delay", "0.01"))
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(130))
+    stop = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))  # stop at the next safe point
     commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
     ckpt = run_dir / "checkpoint" / "state.json"
     step = json.loads(ckpt.read_text())["env_step"] if ckpt.exists() else 0
@@ -40,12 +42,16 @@ FAKE_TRAIN = textwrap.dedent('''
         f.write(f"{step},{commit},False\\n")
     ckpt.parent.mkdir(exist_ok=True)
     while step < steps:
+        if stop:
+            sys.exit(130)
         time.sleep(delay)
         step += 1
         for name in ("eval.csv", "train.csv"):
             with (run_dir / name).open("a") as f:
                 f.write(f"{step},{60.0 * step}" + (",1.0" if name == "eval.csv" else "") + "\\n")
-        ckpt.write_text(json.dumps({"env_step": step}))
+        tmp = ckpt.with_suffix(".tmp")
+        tmp.write_text(json.dumps({"env_step": step}))
+        os.replace(tmp, ckpt)
     print("done", run_dir)
 ''')
 
@@ -132,6 +138,8 @@ def test_queue_skips_finished_resumes_partial_and_commits_logs_only(repo: Path) 
     earlier = repo / "results/x/a/seed3"
     earlier.mkdir(parents=True)
     (earlier / "eval.csv").write_text("env_step,wall_time,episode_reward\n0,0.0,0.0\n1,60.0,1.0\n")
+    git(repo, "add", "results")  # the earlier runs' logs were committed
+    git(repo, "commit", "-q", "-m", "earlier runs")
     head_before = git(repo, "rev-parse", "HEAD")
     (repo / "unrelated.txt").write_text("work in progress")
     git(repo, "add", "unrelated.txt")
@@ -152,6 +160,18 @@ def test_queue_skips_finished_resumes_partial_and_commits_logs_only(repo: Path) 
     assert all(p.startswith("results/x/a/seed") for p in committed)
     assert not any("checkpoint" in p for p in committed)
     assert git(repo, "diff", "--cached", "--name-only") == "unrelated.txt"  # left staged
+
+
+def test_logs_a_stopped_queue_left_uncommitted_are_committed(repo: Path) -> None:
+    plan = "results/x/a/seed1 2 delay=0.01\n"
+    queue = make_queue(repo, plan, minutes_left=60, estimates=rq.parse_estimates(["*=0.01"]),
+                       commit_results=False)
+    assert queue.run() == 0 and rq.logged_step(repo / "results/x/a/seed1") == 2
+    assert git(repo, "status", "--porcelain", "--", "results")  # copied, not committed
+    queue = make_queue(repo, plan, minutes_left=60, estimates=rq.parse_estimates(["*=0.01"]))
+    assert queue.run() == 0
+    assert not git(repo, "status", "--porcelain", "--", "results")
+    assert "results/x/a/seed1 finished" in git(repo, "log", "-1", "--format=%s")
 
 
 def test_deadline_stops_runs_with_sigterm_and_they_resume(repo: Path) -> None:
@@ -196,7 +216,9 @@ def test_worktree_must_be_the_pinned_commit(repo: Path) -> None:
 
 def test_every_plan_line_is_a_valid_run():
     """The committed plans compose and pass every option check with this code (a typo
-    would otherwise surface hours into a queue)."""
+    would otherwise surface hours into a queue). This code, not the commit a plan is
+    run from: an option a plan needs must exist here too, and a plan whose options
+    this code renamed fails here."""
     import warnings
 
     from hydra import compose, initialize_config_dir
@@ -210,8 +232,12 @@ def test_every_plan_line_is_a_valid_run():
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"), \
             warnings.catch_warnings():
         warnings.simplefilter("ignore")  # approximate groups warn (D8 on PointMass2D)
+        plan_runs = [run for plan in plans for run in rq.read_plan(plan.read_text())]
+        for run in plan_runs:  # seeds checked here, then set aside: the same checks
+            seeds = [o.split("=", 1)[1] for o in run.overrides if o.startswith("seed=")]
+            assert len(seeds) == 1 and seeds[0].isdigit(), (run.dest, run.overrides)
         runs = {(run.steps, *sorted(o for o in run.overrides if not o.startswith("seed=")))
-                for plan in plans for run in rq.read_plan(plan.read_text())}
-        for steps, *overrides in sorted(runs):  # seeds aside: the same checks
+                for run in plan_runs}
+        for steps, *overrides in sorted(runs):
             cfg = compose("train", overrides=[*overrides, f"train.steps={steps}"])
             check_task(RunOptions.from_config(OmegaConf.to_container(cfg, resolve=True)))

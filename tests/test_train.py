@@ -195,6 +195,8 @@ def test_changed_options_are_refused_on_resume(tmp_path, capsys):
     (["+agent.equivariant.transtion=false"],
      "unknown option agent.equivariant.transtion; valid: policy, q, transition"),
     (["agent.replay.beta=1.5"], "agent.replay.beta must be in [0, 1], got 1.5"),
+    (["agent.group=D8", "agent.equivariant.transition=false"],
+     "an equivariant Q or policy needs an equivariant latent state"),
     (["agent.replay.alpha=-0.1"], "agent.replay.alpha must be >= 0, got -0.1"),
     (["agent.tau=0"], "agent.tau must be in (0, 1], got 0"),
     (["agent.std_schedule.steps=-1"], "agent.std_schedule.steps must be >= 0, got -1"),

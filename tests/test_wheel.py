@@ -2,6 +2,7 @@
 and its commands work from a copy installed outside the checkout."""
 
 import os
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -14,8 +15,14 @@ ROOT = Path(__file__).resolve().parent.parent
 
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("wheel")
-    subprocess.run([sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps",
+    """Built from a copy of the sources (a build in the checkout would reuse ``build/``,
+    where a module deleted since an earlier build would still ship)."""
+    source, out = tmp_path_factory.mktemp("source"), tmp_path_factory.mktemp("wheel")
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy(ROOT / name, source / name)
+    for name in ("agents", "geomdp_envs", "configs"):
+        shutil.copytree(ROOT / name, source / name, ignore=shutil.ignore_patterns("__pycache__"))
+    subprocess.run([sys.executable, "-m", "pip", "wheel", str(source), "--no-deps",
                     "--no-build-isolation", "-q", "-w", str(out)], check=True, capture_output=True,
                    timeout=300)
     (path,) = out.glob("geomdp-*.whl")
@@ -24,11 +31,9 @@ def wheel(tmp_path_factory) -> Path:
 
 def test_wheel_holds_every_package_and_config(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
-    for package in ("agents", "geomdp_envs"):
-        for init in (ROOT / package).rglob("__init__.py"):
-            assert str(init.relative_to(ROOT)) in names, f"{init.parent} is not in the wheel"
-        for module in (ROOT / package).rglob("*.py"):
-            assert str(module.relative_to(ROOT)) in names, f"{module} is not in the wheel"
+    sources = {str(p.relative_to(ROOT)) for package in ("agents", "geomdp_envs")
+               for p in (ROOT / package).rglob("*.py")}
+    assert {n for n in names if n.endswith(".py")} == sources  # every module, and no other
     configs = sorted((ROOT / "configs").rglob("*.yaml"))
     assert configs
     for config in configs:

@@ -27,7 +27,7 @@ import numpy as np
 from omegaconf import OmegaConf
 from scipy import stats
 
-from agents.run.nested import flatten
+from agents.run.nested import flatten, with_added_later
 
 IGNORED_KEYS = ("seed", "train.progress", "train.threads", "logger", "device",
                 "train.eval_every", "train.eval_episodes", "train.eval_noisy_episodes",
@@ -54,7 +54,8 @@ def find_runs(paths: list[Path]) -> list[Run]:
                 rows = list(csv.DictReader(f))
             if not rows:
                 continue
-            options = flatten(OmegaConf.to_container(OmegaConf.load(config), resolve=False))
+            options = with_added_later(flatten(OmegaConf.to_container(OmegaConf.load(config),
+                                                                      resolve=False)))
             runs.append(Run(eval_csv.parent, options,
                             np.array([int(float(r["env_step"])) for r in rows]),
                             np.array([float(r["episode_reward"]) for r in rows]),

@@ -122,8 +122,8 @@ def run(cfg: DictConfig, run_dir: Path, hydra_records: tuple[DictConfig, DictCon
         except OSError as err:
             raise RunDirError(f"cannot create the run directory {run_dir} ({err.strerror}); "
                               "choose another hydra.run.dir") from None
-        check_writable(run_dir)
-        with RunDirLock(run_dir):
+        with RunDirLock(run_dir):  # first: nothing below reads what another process writes
+            check_writable(run_dir)
             check_same_options(run_dir, options.resolved)
             write_records(run_dir, options.resolved, *(hydra_records or ()))
             log = RunLog(run_dir, options.logger.tensorboard)
@@ -137,6 +137,8 @@ def run(cfg: DictConfig, run_dir: Path, hydra_records: tuple[DictConfig, DictCon
         print(f"geomdp-train: error: {err}", file=sys.stderr)
         return 1 if isinstance(err, (RunDirError, checkpoint.CheckpointWriteError)) else 2
     except KeyboardInterrupt:
+        for s in previous:  # stopping: a further signal must not interrupt the report
+            signal.signal(s, signal.SIG_IGN)
         print(f"\ninterrupted; the last checkpoint is at env step {checkpoint.saved_step(run_dir)}: "
               "run the same command to continue", file=sys.stderr)
         return 130

@@ -228,7 +228,7 @@ class FourierLinear(ConversionHook):
         psi-block of each (output, input) field pair has energy d_psi m_psi / c_in
         (its share d_psi m_psi / |G| of the whole). Our block ``sum_k A_k (x) E_k``
         has expected energy ``m^2 sigma^2 sum_k |E_k|^2``; sigma is set to match.
-        ``bias_init`` defaults to 1/sqrt(fan_in), as ``agents.layers.make_linear``'s.
+        ``bias_init`` defaults to 1/sqrt(fan_in), as ``agents.nn.layers.make_linear``'s.
         """
         with torch.no_grad():
             for g in self.groups:

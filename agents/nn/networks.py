@@ -37,7 +37,7 @@ from agents.nn.layers import (
     norm_and_activation,
 )
 from agents.nn.spectral import Quadrature
-from agents.options import check, key, option, unknown
+from agents.options import OptionError, check, key, option, unknown
 from geomdp_envs.symmetry import Field, Symmetry
 
 WIDTH_STRATEGIES = ("sqrt", "linear")
@@ -65,6 +65,11 @@ class Equivariance:
         for name in self.equivariant:
             if name not in COMPONENTS:
                 raise unknown(f"{key(Equivariance, 'equivariant')}.{name}", COMPONENTS)
+        use = {name: self.equivariant.get(name, True) for name in COMPONENTS}
+        if self.group is not None and (use["q"] or use["policy"]) and not use["transition"]:
+            raise OptionError("agent.equivariant: an equivariant Q or policy needs an "
+                              "equivariant latent state: make the transition (encoder, dynamics, "
+                              "reward) equivariant too")
 
 
 @dataclass
@@ -265,9 +270,6 @@ def build_networks(config: NetworkConfig, symmetry: Symmetry | None,
                                       config.grid_frequency, config.allow_approximate)
         observation, action = symmetry.observation, symmetry.action
     use = {name: group is not None and config.equivariant.get(name, True) for name in COMPONENTS}
-    if (use["q"] or use["policy"]) and not use["transition"]:
-        raise ValueError("an equivariant Q or policy needs an equivariant latent state: "
-                         "make the transition (encoder, dynamics, reward) equivariant too")
     spaces = {name: Space(observation, action, group if use[name] else None, config)
               for name in COMPONENTS}
     latent = spaces["transition"].latent

@@ -30,7 +30,7 @@ import torch
 from torchrl.data import TensorDictReplayBuffer
 
 from agents.run import faults
-from agents.run.nested import differences
+from agents.run.nested import differences, with_added_later
 from agents.tdmpc.agent import TDMPCAgent
 from agents.tdmpc.replay import load_replay, save_replay
 
@@ -144,9 +144,10 @@ def verify(path: Path, options: dict[str, Any] | None = None) -> dict[str, Any]:
         if _sha256(path / name) != digest:
             raise CheckpointError(f"checkpoint {path} is corrupted: {name} does not match its "
                                   "checksum; delete it to start over")
-    if options is not None and manifest.get("options") != options:
+    saved = with_added_later(manifest.get("options") or {})
+    if options is not None and saved != options:
         diffs = [f"{k}: {a!r} there, {b!r} here"
-                 for k, a, b in differences(manifest.get("options") or {}, options)]
+                 for k, a, b in differences(saved, options)]
         raise CheckpointError(f"checkpoint {path} belongs to another run ({'; '.join(diffs[:3])}); "
                               "use that run's options, or delete the checkpoint to start over")
     return json.loads((path / "state.json").read_text())

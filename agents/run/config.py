@@ -5,6 +5,7 @@ declaration decides which groups are valid)."""
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import typing
 import warnings
@@ -55,9 +56,6 @@ class LoggerOptions:
 
     def __post_init__(self) -> None:
         check(self)
-        if self.tensorboard is True and importlib.util.find_spec("tensorboard") is None:
-            raise OptionError("logger.tensorboard=true but the tensorboard package is not installed "
-                              "(pip install tensorboard); use logger.tensorboard=auto or false")
 
 
 @dataclass
@@ -66,8 +64,8 @@ class EnvOptions:
     (every other key of the ``env`` section)."""
 
     KEY: typing.ClassVar[str] = "env"
-    name: str = "pointmass2d"
-    id: str = "GeoMDP/PointMass2D-v0"
+    id: str  # no default: a config without one is an error, not PointMass2D
+    name: str = ""
     action_repeat: int = option(1, low=1)
     kwargs: dict[str, Any] = field(default_factory=dict)
 
@@ -82,23 +80,22 @@ class EnvOptions:
 
 @dataclass
 class RunOptions:
-    """Every option of a run; ``resolved`` is the config as written to ``config.yaml``."""
+    """Every option of a run; ``resolved`` (not an option) is the config as written to
+    ``config.yaml``, when the options came from one."""
 
     KEY: typing.ClassVar[str] = ""
+    env: EnvOptions
     seed: int = option(1, low=0)
     device: str = "cpu"
     train: TrainOptions = field(default_factory=TrainOptions)
     logger: LoggerOptions = field(default_factory=LoggerOptions)
-    env: EnvOptions = field(default_factory=EnvOptions)
     agent: TDMPCConfig = field(default_factory=TDMPCConfig)
-    resolved: dict[str, Any] = field(default_factory=dict, repr=False)
+    resolved: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         check(self)
         if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
             raise OptionError(f"device={self.device!r}; valid: cpu, cuda, cuda:<n>")
-        if self.device.startswith("cuda") and not torch.cuda.is_available():
-            raise OptionError(f"device={self.device} but no CUDA device is available; use device=cpu")
 
     @classmethod
     def from_config(cls, resolved: dict[str, Any]) -> RunOptions:
@@ -108,13 +105,15 @@ class RunOptions:
             data["env"] = EnvOptions.from_section(data["env"])
         if isinstance(data.get("agent"), dict):
             data["agent"] = from_dict(TDMPCConfig, data["agent"])
-        if "resolved" in data:
-            raise OptionError("unknown option 'resolved'")
-        return from_dict(cls, {**data, "resolved": resolved})
+        options = from_dict(cls, data)
+        options.resolved = resolved
+        return options
 
     def checkpoint_options(self) -> dict[str, Any]:
-        """The options a checkpoint belongs to: all but those a continued run may change."""
-        return {k: v for k, v in flatten(self.resolved).items() if not k.startswith(RESUMABLE_KEYS)}
+        """The options a checkpoint belongs to: all but those a continued run may change
+        (from the resolved config, or from the dataclasses for options built in Python)."""
+        plain = self.resolved or dataclasses.asdict(self)
+        return {k: v for k, v in flatten(plain).items() if not k.startswith(RESUMABLE_KEYS)}
 
 
 @dataclass(frozen=True)
@@ -127,8 +126,16 @@ class Task:
 
 
 def check_task(options: RunOptions) -> Task:
-    """Make the env once (its own checks of its kwargs) and check the agent's group
-    against the task's declaration; warn once for an approximate group."""
+    """The checks that need this machine or the task: the device and logger are here,
+    the env makes itself once (its own checks of its kwargs), the agent's group and
+    augmentation fit the task's declaration; warns once for an approximate group.
+    (Options alone are checked by the dataclasses, so reading a run's config needs
+    neither its device nor its task.)"""
+    if options.device.startswith("cuda") and not torch.cuda.is_available():
+        raise OptionError(f"device={options.device} but no CUDA device is available; use device=cpu")
+    if options.logger.tensorboard is True and importlib.util.find_spec("tensorboard") is None:
+        raise OptionError("logger.tensorboard=true but the tensorboard package is not installed "
+                          "(pip install tensorboard); use logger.tensorboard=auto or false")
     env = make_gym_env(options.env.id, options.env.kwargs)
     task = Task(declared_symmetry(env), env.observation_space.shape[0], env.action_space.shape[0])
     env.close()

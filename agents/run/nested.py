@@ -16,6 +16,18 @@ def flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
+# Options added after runs were already made, with the value that reproduces those runs:
+# filled into an older run's options before comparing or grouping, so that it resumes
+# and plots beside newer runs. Add a key here whenever an option is added.
+ADDED_LATER = {"agent.augment": "none"}
+
+
+def with_added_later(flat: dict[str, Any]) -> dict[str, Any]:
+    """Flattened options with every ``ADDED_LATER`` key an older run lacks filled in
+    (none recorded: nothing to fill)."""
+    return {**ADDED_LATER, **flat} if flat else flat
+
+
 def differences(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
     """``(dotted key, value in a, value in b)`` wherever two option dicts differ, sorted
     by key (a key missing on one side compares as ``None``)."""

@@ -14,7 +14,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from agents.options import OptionError
 from agents.run.config import RESUMABLE_KEYS
-from agents.run.nested import differences
+from agents.run.nested import differences, flatten, with_added_later
 
 LOCK_FILE = "run.lock"
 
@@ -56,8 +56,9 @@ def check_same_options(run_dir: Path, resolved: dict[str, Any]) -> None:
     saved_path = run_dir / "config.yaml"
     if not saved_path.exists():
         return
-    saved = OmegaConf.to_container(OmegaConf.load(saved_path), resolve=True)
-    diffs = [f"{k}: {a!r} -> {b!r}" for k, a, b in differences(saved, resolved)
+    saved = with_added_later(flatten(OmegaConf.to_container(OmegaConf.load(saved_path),
+                                                            resolve=True)))
+    diffs = [f"{k}: {a!r} -> {b!r}" for k, a, b in differences(saved, flatten(resolved))
              if not k.startswith(RESUMABLE_KEYS)]
     if diffs:
         raise OptionError(f"{run_dir} holds a run with other options ({'; '.join(diffs)}); "
@@ -90,7 +91,12 @@ class RunDirLock:
         self._file: IO[str] | None = None
 
     def __enter__(self) -> RunDirLock:
-        handle = self.path.open("a+")
+        try:
+            handle = self.path.open("a+")
+        except OSError as err:
+            raise RunDirError(f"cannot write in the run directory {self.path.parent} "
+                              f"({err.strerror}); choose another hydra.run.dir or fix its "
+                              "permissions") from None
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:

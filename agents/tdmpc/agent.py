@@ -92,6 +92,9 @@ class TDMPCConfig(Equivariance):
         return NetworkConfig.combine(self, self.networks)
 
 
+AUGMENT_SEED = 1_000_003  # offset of the augmentation generator's seed from the agent's
+
+
 def _probe(size: int) -> torch.Tensor:
     return torch.randn(size, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
 
@@ -114,7 +117,7 @@ class TDMPCAgent:
         policy_ids = {id(p) for p in policy_params}
         # Fused Adam: one kernel over all parameters (the per-parameter loop's dispatch
         # dominates at these sizes). Writes that bypass version counters are harmless:
-        # nothing here caches on them (see agents.layers.expansion_scope).
+        # nothing here caches on them (see agents.nn.layers.expansion_scope).
         self.model_optimizer = torch.optim.Adam(
             [p for p in self.model.parameters() if id(p) not in policy_ids], lr=config.lr,
             fused=True)
@@ -124,8 +127,9 @@ class TDMPCAgent:
         self.noise = NoiseSource(self.generator)
         self.updates = 0
         self.horizon_schedule = Schedule(1, config.horizon, config.horizon_schedule)
+        # its own stream: the agent's generator (warm-up actions, planner noise) has ``seed``
         self.augmentation = (None if config.augment == "none"
-                             else SliceAugmentation(config.augment, symmetry, seed))
+                             else SliceAugmentation(config.augment, symmetry, seed + AUGMENT_SEED))
 
     def horizon(self, step: int) -> int:
         return int(round(self.horizon_schedule(step)))
@@ -152,7 +156,7 @@ class TDMPCAgent:
         (losses["loss_model"] + losses["loss_pi"]).backward()
         clip = self.config.grad_clip_norm
         # The optimisers' parameter lists, not ``Module.parameters()``: walking an escnn
-        # network's modules is slow (``agents.layers.submodules``).
+        # network's modules is slow (``agents.nn.layers.submodules``).
         model_grad, policy_grad = (torch.nn.utils.clip_grad_norm_(
             [p for g in optimizer.param_groups for p in g["params"]], clip, foreach=True)
             for optimizer in (self.model_optimizer, self.policy_optimizer))
