@@ -28,6 +28,12 @@ RESUMABLE_KEYS = ("train.steps", "train.eval_every", "train.eval_episodes",
                   "train.video", "train.threads", "device", "logger.tensorboard")
 
 
+def fixed_options(flat: dict[str, Any]) -> dict[str, Any]:
+    """The flattened options a continued run must keep (all but ``RESUMABLE_KEYS``): what
+    a checkpoint belongs to, and what a resume in the same run directory is checked on."""
+    return {k: v for k, v in flat.items() if not k.startswith(RESUMABLE_KEYS)}
+
+
 @dataclass
 class TrainOptions:
     """The training loop's budgets and schedule (``train.*``)."""
@@ -113,7 +119,7 @@ class RunOptions:
         """The options a checkpoint belongs to: all but those a continued run may change
         (from the resolved config, or from the dataclasses for options built in Python)."""
         plain = self.resolved or dataclasses.asdict(self)
-        return {k: v for k, v in flatten(plain).items() if not k.startswith(RESUMABLE_KEYS)}
+        return fixed_options(flatten(plain))
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from typing import IO, Any
 from omegaconf import DictConfig, OmegaConf
 
 from agents.options import OptionError
-from agents.run.config import RESUMABLE_KEYS
+from agents.run.config import fixed_options
 from agents.run.nested import differences, flatten, with_added_later
 
 LOCK_FILE = "run.lock"
@@ -58,8 +58,8 @@ def check_same_options(run_dir: Path, resolved: dict[str, Any]) -> None:
         return
     saved = with_added_later(flatten(OmegaConf.to_container(OmegaConf.load(saved_path),
                                                             resolve=True)))
-    diffs = [f"{k}: {a!r} -> {b!r}" for k, a, b in differences(saved, flatten(resolved))
-             if not k.startswith(RESUMABLE_KEYS)]
+    diffs = [f"{k}: {a!r} -> {b!r}"
+             for k, a, b in differences(fixed_options(saved), fixed_options(flatten(resolved)))]
     if diffs:
         raise OptionError(f"{run_dir} holds a run with other options ({'; '.join(diffs)}); "
                           "use another hydra.run.dir, or the run's own options")

@@ -10,6 +10,7 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.objectives import SoftUpdate
 
+from agents.compat.escnn import is_basis_expansion_key
 from agents.nn.layers import expansion_scope
 from agents.nn.networks import Architecture, Equivariance, NetworkConfig, build_networks
 from agents.nn.spectral import GridActivation
@@ -29,8 +30,6 @@ ESCNN_BUFFERS = ("matrix", "expanded_bias", "bias_expansion")
 
 def rebuilt_with_networks(key: str) -> bool:
     """Whether a state-dict entry is one of escnn's rebuildable buffers (not saved)."""
-    from agents.compat.escnn import is_basis_expansion_key
-
     return is_basis_expansion_key(key) or (".layer." in key and key.rsplit(".", 1)[-1] in ESCNN_BUFFERS)
 
 
