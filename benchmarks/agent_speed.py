@@ -91,7 +91,7 @@ with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
 options = RunOptions.from_config(OmegaConf.to_container(cfg, resolve=True))
 info = check_task(options)
 agent_cfg = options.agent
-env = torchrl_env(make_gym_env(options.env.id, options.env.kwargs), options.env.action_repeat)
+env = torchrl_env(make_gym_env(options.env), options.env.action_repeat)
 agent = TDMPCAgent(agent_cfg, info.symmetry, info.observation_size, info.action_size)
 buffer = make_replay_buffer(agent_cfg.replay, agent_cfg.horizon, agent_cfg.batch_size)
 td = env.rollout(1000, break_when_any_done=True)

@@ -35,7 +35,7 @@ def main() -> None:
     torch.set_num_threads(1)
     options = RunOptions.from_config(OmegaConf.to_container(OmegaConf.load(args.run_dir / "config.yaml")))
     agent_cfg = options.agent
-    env = make_gym_env(options.env.id, options.env.kwargs,
+    env = make_gym_env(options.env,
                        render_mode="rgb_array" if args.video else None)
     agent = TDMPCAgent(agent_cfg, declared_symmetry(env), env.observation_space.shape[0],
                        env.action_space.shape[0])

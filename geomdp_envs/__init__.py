@@ -20,12 +20,20 @@ import gymnasium  # noqa: E402
 from geomdp_envs import groups  # noqa: E402
 from geomdp_envs.augment import augment_transitions, default_augmentation_group  # noqa: E402
 from geomdp_envs.check import SymmetryReport, check_symmetry  # noqa: E402
+from geomdp_envs.declare import (  # noqa: E402
+    Declaration,
+    DeclaredEnv,
+    declare,
+    load_declaration,
+    symmetry_of,
+)
 from geomdp_envs.mujoco_env import GeometricMujocoEnv, PhysicsError, SimState  # noqa: E402
 from geomdp_envs.symmetry import Field, Symmetry  # noqa: E402
 
 __all__ = [
-    "Field", "GeometricMujocoEnv", "PhysicsError", "SimState", "Symmetry", "SymmetryReport", "TASKS",
-    "augment_transitions", "check_symmetry", "default_augmentation_group", "groups",
+    "Declaration", "DeclaredEnv", "Field", "GeometricMujocoEnv", "PhysicsError", "SimState", "Symmetry",
+    "SymmetryReport", "TASKS", "augment_transitions", "check_symmetry", "declare",
+    "default_augmentation_group", "groups", "load_declaration", "symmetry_of",
 ]
 
 EPISODE_STEPS = 1000  # dm_control's 20 s at a 0.02 s control step

@@ -7,19 +7,21 @@ and group elements g, it compares
 * obs after g . a_1..a_T  with  rho_S(g) obs after a_1..a_T  (the dynamics),
 * each reward             with  the untransformed one (invariance),
 
-where g . s is the simulator state moved by g (``env.transform_state``), which
-is independent of the declaration. A wrong declaration, or a group element the
-task is not symmetric under, shows up as a large error.
+where g . s is the simulator state moved by g (``env.transform_state``; for a
+third-party env, the state part of its ``declare`` declaration). A wrong
+observation declaration, or a group element the task is not symmetric under,
+shows up as a large error, and the report names the field where it is largest.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import gymnasium
 import numpy as np
 
 from geomdp_envs import groups
+from geomdp_envs.declare import DeclaredEnv, declared_env
 from geomdp_envs.mujoco_env import GeometricMujocoEnv
 from geomdp_envs.symmetry import Symmetry
 
@@ -36,6 +38,8 @@ class SymmetryReport:
     max_reward_error: float
     worst_element: np.ndarray
     worst_permutation: np.ndarray | None
+    # largest error of each observation field (its label), over the start and later steps
+    field_errors: dict[str, float] = field(default_factory=dict)
 
     @property
     def max_error(self) -> float:
@@ -46,12 +50,25 @@ class SymmetryReport:
     def passed(self) -> bool:
         return self.max_error <= self.tolerance
 
+    @property
+    def failing_fields(self) -> list[str]:
+        """Observation fields whose error exceeds the tolerance, worst first."""
+        bad = [name for name, err in self.field_errors.items() if err > self.tolerance]
+        return sorted(bad, key=lambda name: -self.field_errors[name])
+
     def __str__(self) -> str:
         verdict = "PASS" if self.passed else "FAIL"
-        return (f"{verdict} {self.group}: {self.n_trials} trials, max |error| "
+        text = (f"{verdict} {self.group}: {self.n_trials} trials, max |error| "
                 f"obs {self.max_observation_error:.2e}, next obs "
                 f"{self.max_next_observation_error:.2e}, reward {self.max_reward_error:.2e} "
                 f"(tolerance {self.tolerance:.0e})")
+        if self.failing_fields:
+            text += "; fields over tolerance: " + ", ".join(
+                f"{name} {self.field_errors[name]:.2e}" for name in self.failing_fields)
+        if self.max_observation_error <= self.tolerance < self.max_next_observation_error:
+            text += (" (obs(g.s) matches, the steps after it do not: the action declaration, a "
+                     "state the observation does not show, or the dynamics break the symmetry)")
+        return text
 
 
 def check_symmetry(
@@ -68,7 +85,8 @@ def check_symmetry(
     """Check ``env``'s declared symmetry numerically; returns the largest errors.
 
     Args:
-        env: a GeoMDP env (wrappers are looked through).
+        env: a GeoMDP env, or a third-party MuJoCo env wrapped by ``geomdp_envs.declare``
+            with a state declaration (wrappers are looked through).
         group: name of the group to sample elements from (default: the task's
             exact group); any group of ``geomdp_envs.groups``, e.g. ``"O(2)"``.
         elements: explicit orthogonal matrices [k, d, d] to use instead.
@@ -78,9 +96,7 @@ def check_symmetry(
         permute_particles: also relabel interchangeable particles at random.
         tolerance: largest absolute error that counts as a pass.
     """
-    base = env.unwrapped
-    if not isinstance(base, GeometricMujocoEnv):
-        raise TypeError(f"{type(base).__name__} is not a GeoMDP env: it declares no symmetry")
+    base = _simulator(env)
     symmetry = symmetry or base.symmetry
     rng = np.random.default_rng(seed)
     if elements is None:
@@ -94,6 +110,7 @@ def check_symmetry(
         group = group or f"{len(elements)} given elements"
     saved = base.get_state()
     errors = np.zeros((n_trials, 3))
+    coordinate_errors = np.zeros(symmetry.observation_size)
     perms = []
     try:
         for trial in range(n_trials):
@@ -102,18 +119,36 @@ def check_symmetry(
             if permute_particles and symmetry.n_particles > 1:
                 perm = rng.permutation(symmetry.n_particles)
             perms.append(perm)
-            errors[trial] = _one_trial(base, symmetry, g, perm, rng, n_steps)
+            obs_error, errors[trial, 2] = _one_trial(base, symmetry, g, perm, rng, n_steps)
+            errors[trial, :2] = obs_error[0].max(), obs_error[1:].max()
+            coordinate_errors = np.maximum(coordinate_errors, obs_error.max(axis=0))
     finally:
         base.set_state(saved)
     worst = int(np.argmax(errors.max(axis=1)))
+    field_errors = {f.label: float(coordinate_errors[f.start:f.stop].max()) for f in symmetry.observation}
     return SymmetryReport(group, n_trials, tolerance, *errors.max(axis=0).tolist(),
                           worst_element=elements[worst % len(elements)],
-                          worst_permutation=perms[worst])
+                          worst_permutation=perms[worst], field_errors=field_errors)
 
 
-def _one_trial(env: GeometricMujocoEnv, symmetry: Symmetry, g: np.ndarray,
-               perm: np.ndarray | None, rng: np.random.Generator, n_steps: int) -> np.ndarray:
-    """Max errors (observation, next observations, rewards) for one triple."""
+def _simulator(env: gymnasium.Env) -> GeometricMujocoEnv | DeclaredEnv:
+    """What check_symmetry moves: the built-in task, or the ``declare`` wrapper (whose
+    state access raises a clear error when the env's state cannot be set)."""
+    if isinstance(env.unwrapped, GeometricMujocoEnv):
+        return env.unwrapped
+    wrapper = declared_env(env)
+    if wrapper is None:
+        raise TypeError(f"{type(env.unwrapped).__name__} declares no symmetry: wrap it with "
+                        "geomdp_envs.declare(env, ...) (see README, 'Bring your own task')")
+    wrapper.get_state()  # raises if the declaration has no state or the env cannot be set
+    return wrapper
+
+
+def _one_trial(env: GeometricMujocoEnv | DeclaredEnv, symmetry: Symmetry, g: np.ndarray,
+               perm: np.ndarray | None, rng: np.random.Generator,
+               n_steps: int) -> tuple[np.ndarray, float]:
+    """Errors for one triple: |observation error| [n_steps + 1, observation_size] and the
+    largest reward error."""
     rho_s, rho_a = symmetry.observation_matrix(g), symmetry.action_matrix(g)
     if perm is not None:
         rho_s = symmetry.observation_permutation_matrix(perm) @ rho_s
@@ -139,5 +174,4 @@ def _one_trial(env: GeometricMujocoEnv, symmetry: Symmetry, g: np.ndarray,
 
     predicted = np.stack(obs) @ rho_s.T
     obs_error = np.abs(np.stack(obs_g) - predicted)
-    return np.array([obs_error[0].max(), obs_error[1:].max(),
-                     np.abs(np.subtract(rewards_g, rewards)).max()])
+    return obs_error, float(np.abs(np.subtract(rewards_g, rewards)).max())

@@ -9,15 +9,24 @@ from agents import NetworkConfig, build_networks, group_for_task, make_group, sq
 from agents.nn.layers import EquivariantLinear, FieldLayerNorm, submodules
 from agents.nn.networks import project
 from geomdp_envs import groups
+from geomdp_envs.declare import declare
 
 SMALL = dict(hidden_dim=24, latent_dim=16, hidden_layers=2)
 TASKS_2D = {"pointmass2d": ("GeoMDP/PointMass2D-v0", {}),
             "reacher": ("GeoMDP/Reacher-v0", {})}
 TASK_3D = ("GeoMDP/PointMass3D-v0", {"n_balls": 2})
+# Third-party envs with a shipped declaration (non-contiguous fields, reordered by declare)
+DECLARED = {"reacher_v5": "Reacher-v5", "inverted_pendulum_v5": "InvertedPendulum-v5"}
 
 
 def declaration(env_id, kwargs):
     return gymnasium.make(env_id, **kwargs).unwrapped.symmetry
+
+
+def task_symmetry(task):
+    if task in DECLARED:
+        return declare(gymnasium.make(DECLARED[task]), task).symmetry
+    return declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
 
 
 def rep(layout, element):
@@ -37,7 +46,8 @@ def relative_error(a, b):
 
 
 CASES = [(g, "pointmass2d") for g in ("C4", "C8", "C16", "D4", "D8", "D16")] + \
-        [("D8", "reacher"), ("C8", "reacher")] + \
+        [("D8", "reacher"), ("C8", "reacher"), ("D1", "pointmass2d")] + \
+        [("D8", "reacher_v5"), ("D1", "inverted_pendulum_v5")] + \
         [(g, "pointmass3d") for g in ("octahedral", "icosahedral")]
 
 
@@ -45,7 +55,7 @@ CASES = [(g, "pointmass2d") for g in ("C4", "C8", "C16", "D4", "D8", "D16")] + \
 @pytest.mark.parametrize("strategy", ["sqrt", "linear"])
 def test_every_network_is_equivariant_for_every_group_element(group_name, task, strategy,
                                                             randomise_heads):
-    sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
+    sym = task_symmetry(task)
     nets = randomise_heads(build_networks(
         NetworkConfig(group=group_name, width_strategy=strategy, **SMALL), sym))
     torch.manual_seed(0)

@@ -95,12 +95,14 @@ class AgentGroup:
     def has_reflections(self) -> bool:
         return self.name.startswith("D") or self.name in ("O2", "O3")
 
-    @property
+    @functools.cached_property
     def standard(self) -> escnn_group.Representation:
         """The representation on R^d: how positions, velocities and forces move."""
         if self.dim == 3:
             standard = self.escnn.standard_representation  # a method on SO(3)/O(3)
             return standard if isinstance(standard, escnn_group.Representation) else standard()
+        if self.name == "D1":  # one reflection (y -> -y): R^2 splits into x (fixed) and y (sign)
+            return escnn_group.directsum([self.trivial, self.escnn.irrep(1, 0)], name="D1_standard")
         return self.escnn.irrep(1, 1) if self.has_reflections else self.escnn.irrep(1)
 
     @functools.cached_property
@@ -185,8 +187,9 @@ def make_group(name: str, max_frequency: int | None = None,
     match = _PLANAR.match(name)
     if match:
         n = int(match.group(2))
-        if n < 2:
-            raise ValueError(f"group {name}: N must be at least 2")
+        if n < (1 if match.group(1) == "D" else 2):
+            raise ValueError(f"group {name}: N must be at least {1 if match.group(1) == 'D' else 2} "
+                             "(D1 is the one reflection, C1 the trivial group)")
         g = escnn_group.cyclic_group(n) if match.group(1) == "C" else escnn_group.dihedral_group(n)
         return AgentGroup(name, g, 2)
     spatial = {"octahedral": escnn_group.octa_group, "icosahedral": escnn_group.ico_group}

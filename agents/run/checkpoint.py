@@ -145,9 +145,10 @@ def verify(path: Path, options: dict[str, Any] | None = None) -> dict[str, Any]:
             raise CheckpointError(f"checkpoint {path} is corrupted: {name} does not match its "
                                   "checksum; delete it to start over")
     saved = with_added_later(manifest.get("options") or {})
-    if options is not None and saved != options:
-        diffs = [f"{k}: {a!r} there, {b!r} here"
-                 for k, a, b in differences(saved, options)]
+    # differences, not !=: a key one side lacks compares as None (an option added later)
+    diffs = [] if options is None else [f"{k}: {a!r} there, {b!r} here"
+                                        for k, a, b in differences(saved, options)]
+    if diffs:
         raise CheckpointError(f"checkpoint {path} belongs to another run ({'; '.join(diffs[:3])}); "
                               "use that run's options, or delete the checkpoint to start over")
     return json.loads((path / "state.json").read_text())

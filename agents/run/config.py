@@ -66,13 +66,16 @@ class LoggerOptions:
 
 @dataclass
 class EnvOptions:
-    """Which env (``id``), its action repeat, and the keyword arguments of ``gymnasium.make``
-    (every other key of the ``env`` section)."""
+    """Which env (``id``), its action repeat, the symmetry declaration of a third-party env
+    (``symmetry``: a shipped name, a YAML path or the mapping itself; see
+    ``geomdp_envs.declare``), and the keyword arguments of ``gymnasium.make`` (every other
+    key of the ``env`` section)."""
 
     KEY: typing.ClassVar[str] = "env"
     id: str  # no default: a config without one is an error, not PointMass2D
     name: str = ""
     action_repeat: int = option(1, low=1)
+    symmetry: dict[str, Any] | str | None = None
     kwargs: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -80,7 +83,7 @@ class EnvOptions:
 
     @classmethod
     def from_section(cls, section: dict[str, Any]) -> EnvOptions:
-        meta = {k: v for k, v in section.items() if k in ("name", "id", "action_repeat")}
+        meta = {k: v for k, v in section.items() if k in ("name", "id", "action_repeat", "symmetry")}
         return from_dict(cls, {**meta, "kwargs": {k: v for k, v in section.items() if k not in meta}})
 
 
@@ -142,7 +145,7 @@ def check_task(options: RunOptions) -> Task:
     if options.logger.tensorboard is True and importlib.util.find_spec("tensorboard") is None:
         raise OptionError("logger.tensorboard=true but the tensorboard package is not installed "
                           "(pip install tensorboard); use logger.tensorboard=auto or false")
-    env = make_gym_env(options.env.id, options.env.kwargs)
+    env = make_gym_env(options.env)
     task = Task(declared_symmetry(env), env.observation_space.shape[0], env.action_space.shape[0])
     env.close()
     agent = options.agent
@@ -151,8 +154,8 @@ def check_task(options: RunOptions) -> Task:
     if agent.group is not None:
         if task.symmetry is None:
             raise OptionError(f"agent.group={agent.group} needs a task that declares its symmetry "
-                              f"({', '.join(TASK_ENVS)}); {options.env.id} does not: use "
-                              "agent.group=none")
+                              f"({', '.join(TASK_ENVS)}, or env.symmetry=<declaration>); "
+                              f"{options.env.id} does not: use agent.group=none")
         nets = agent.networks
         try:
             _, exact = group_for_task(agent.group, task.symmetry, nets.max_frequency,

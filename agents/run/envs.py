@@ -3,6 +3,8 @@ TorchRL with TD-MPC's action repeat."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import gymnasium
 import numpy as np
 from torchrl.envs import GymWrapper, TransformedEnv
@@ -10,33 +12,51 @@ from torchrl.envs.transforms import FrameSkipTransform
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
 from agents.options import OptionError
+from geomdp_envs.declare import declare, symmetry_of
 from geomdp_envs.symmetry import Symmetry
+
+if TYPE_CHECKING:
+    from agents.run.config import EnvOptions
 
 TASK_ENVS = ("pointmass2d", "pointmass3d", "reacher")
 
 
-def make_gym_env(env_id: str, kwargs: dict, render_mode: str | None = None) -> gymnasium.Env:
-    """The Gymnasium env ``env_id``; its errors (bad kwargs) become OptionErrors, and its
+def make_gym_env(env: EnvOptions, render_mode: str | None = None) -> gymnasium.Env:
+    """The Gymnasium env of the ``env`` options, with its symmetry declaration attached when
+    ``env.symmetry`` gives one; its errors (bad kwargs, a bad declaration) become
+    OptionErrors, float64 observations become float32 (the networks' dtype), and its
     actions are rescaled to [-1, 1] (TD-MPC's action domain) when they are not already."""
-    if env_id not in gymnasium.registry:
-        raise OptionError(f"unknown environment {env_id!r}: use env=<one of "
+    if env.id not in gymnasium.registry:
+        raise OptionError(f"unknown environment {env.id!r}: use env=<one of "
                           f"{', '.join(TASK_ENVS)}> or env=<a registered Gymnasium id>")
-    kwargs = dict(kwargs) | ({"render_mode": render_mode} if render_mode else {})
+    kwargs = dict(env.kwargs) | ({"render_mode": render_mode} if render_mode else {})
     try:
-        env = gymnasium.make(env_id, **kwargs)
+        gym_env = gymnasium.make(env.id, **kwargs)
     except (ValueError, TypeError) as err:
         raise OptionError(str(err)) from None
-    if not isinstance(env.action_space, gymnasium.spaces.Box):
-        raise OptionError(f"{env_id} has a {type(env.action_space).__name__} action space; "
+    if not isinstance(gym_env.action_space, gymnasium.spaces.Box):
+        raise OptionError(f"{env.id} has a {type(gym_env.action_space).__name__} action space; "
                           "TD-MPC needs a Box")
-    if not (np.all(env.action_space.low == -1) and np.all(env.action_space.high == 1)):
-        env = gymnasium.wrappers.RescaleAction(env, -1.0, 1.0)
-    return env
+    if env.symmetry is not None:
+        try:
+            gym_env = declare(gym_env, env.symmetry)
+        except ValueError as err:
+            raise OptionError(f"env.symmetry: {err}") from None
+    space = gym_env.observation_space
+    if isinstance(space, gymnasium.spaces.Box) and space.dtype == np.float64:  # MuJoCo's (Reacher-v5)
+        single = gymnasium.spaces.Box(space.low.astype(np.float32), space.high.astype(np.float32),
+                                      dtype=np.float32)
+        gym_env = gymnasium.wrappers.TransformObservation(
+            gym_env, lambda obs: np.asarray(obs, dtype=np.float32), single)
+    low, high = gym_env.action_space.low, gym_env.action_space.high
+    if not (np.all(low == -1) and np.all(high == 1)):
+        gym_env = gymnasium.wrappers.RescaleAction(gym_env, np.float32(-1), np.float32(1))  # no cast warning
+    return gym_env
 
 
 def declared_symmetry(env: gymnasium.Env) -> Symmetry | None:
-    """The task's symmetry declaration, if it makes one."""
-    return getattr(env.unwrapped, "symmetry", None)
+    """The task's symmetry declaration (its own, or attached by ``env.symmetry``), if any."""
+    return symmetry_of(env)
 
 
 def torchrl_env(gym_env: gymnasium.Env, action_repeat: int) -> TransformedEnv:

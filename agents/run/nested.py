@@ -19,7 +19,7 @@ def flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 # Options added after runs were already made, with the value that reproduces those runs:
 # filled into an older run's options before comparing or grouping, so that it resumes
 # and plots beside newer runs. Add a key here whenever an option is added.
-ADDED_LATER = {"agent.augment": "none"}
+ADDED_LATER = {"agent.augment": "none", "env.symmetry": None}
 
 
 def with_added_later(flat: dict[str, Any]) -> dict[str, Any]:

@@ -68,10 +68,10 @@ def build_parts(options: RunOptions, task: Task) -> Parts:
     torch.manual_seed(options.seed)
     np.random.seed(options.seed)
     env_opts = options.env
-    env = torchrl_env(make_gym_env(env_opts.id, env_opts.kwargs), env_opts.action_repeat)
+    env = torchrl_env(make_gym_env(env_opts), env_opts.action_repeat)
     if options.train.video:
         load_triton_before_mesa()
-    eval_gym_env = make_gym_env(env_opts.id, env_opts.kwargs,
+    eval_gym_env = make_gym_env(env_opts,
                                 render_mode="rgb_array" if options.train.video else None)
     eval_env = torchrl_env(eval_gym_env, env_opts.action_repeat)
     agent = TDMPCAgent(options.agent, task.symmetry, task.observation_size, task.action_size,

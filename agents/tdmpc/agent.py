@@ -147,6 +147,8 @@ class TDMPCAgent:
         """One gradient step on a [batch, horizon] TensorDict. Returns the losses and
         health metrics, and each slice's new replay priority (TD-MPC's TD error). With
         ``agent.augment``, the slices are moved by random group elements first."""
+        if batch["observation"].dtype != torch.float32:  # float64 from MuJoCo's envs (Reacher-v5)
+            batch = batch.apply(lambda t: t.float() if t.is_floating_point() else t)
         if self.augmentation is not None:
             batch = self.augmentation(batch)
         losses = self.loss(batch.to(self.device))

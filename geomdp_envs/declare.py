@@ -1,0 +1,429 @@
+"""Declare the symmetry of a third-party environment (bring your own task).
+
+A built-in GeoMDP task lays its fields out one after another. A third-party env
+rarely does: Gymnasium's ``Reacher-v5`` observes ``cos q1, cos q2, sin q1, sin q2,
+...``, so the vector ``(cos q1, sin q1)`` sits at indices 0 and 2. A
+``Declaration`` names each field by the indices it occupies; ``declare`` wraps the
+env in a ``DeclaredEnv`` that reorders observations (and actions) into the
+declaration's order, so that everything downstream (the ``Symmetry`` it exposes,
+augmentation, the equivariant agent) sees contiguous fields as for a built-in task.
+
+To be checked against its simulator (``check_symmetry``), a declaration also says
+how the physical state moves: which of MuJoCo's ``qpos`` and ``qvel`` entries are
+vectors, signs, planar orientation angles. Declarations are plain data and load
+from YAML (``load_declaration("reacher_v5")`` reads a shipped one, or give a path).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import numpy as np
+import yaml
+from gymnasium import spaces
+
+from geomdp_envs import groups
+from geomdp_envs.mujoco_env import SimState
+from geomdp_envs.symmetry import REPRESENTATIONS, Field, Symmetry, rep_matrix, rep_size
+
+# A planar orientation angle phi (an absolute hinge about the plane's normal): g moves
+# it to the angle of g (cos phi, sin phi). Only the state has these; observations show
+# an angle as a vector (cos, sin) or not at all.
+STATE_REPRESENTATIONS = REPRESENTATIONS + ("angle",)
+STATE_VECTORS = ("qpos", "qvel")
+SHIPPED = resources.files("geomdp_envs") / "declarations"
+WARM_UP_STEPS = 5  # random actions after reset, so that sampled states move
+
+
+@dataclass(frozen=True)
+class IndexedField:
+    """A field at arbitrary ``index`` positions of a vector (one per coordinate)."""
+
+    name: str
+    rep: str
+    index: tuple[int, ...]
+
+    @classmethod
+    def parse(cls, entry: Any, kind: str) -> IndexedField:
+        """From ``{name, rep, index}`` or ``(name, rep, index)``; ``index`` an int or list."""
+        if isinstance(entry, IndexedField):
+            return entry
+        if isinstance(entry, Mapping):
+            unknown = set(entry) - {"name", "rep", "index"}
+            if unknown or not {"name", "rep", "index"} <= set(entry):
+                raise ValueError(f"{kind} field {dict(entry)!r}: needs exactly the keys name, rep, index")
+            name, rep, index = entry["name"], entry["rep"], entry["index"]
+        elif isinstance(entry, Sequence) and not isinstance(entry, str) and len(entry) == 3:
+            name, rep, index = entry
+        else:
+            raise ValueError(f"{kind} field {entry!r}: write it as {{name, rep, index}} or "
+                             "(name, rep, index)")
+        index = (index,) if isinstance(index, int) else tuple(index)
+        if not index or not all(isinstance(i, int) and not isinstance(i, bool) for i in index):
+            raise ValueError(f"{kind} field {name!r}: index must be an int or a list of ints, "
+                             f"got {index!r}")
+        return cls(str(name), str(rep), index)
+
+
+def _parse_fields(entries: Any, kind: str) -> tuple[IndexedField, ...]:
+    if entries is None or isinstance(entries, (str, Mapping)) or not isinstance(entries, Sequence):
+        raise ValueError(f"{kind}: expected a list of fields, got {type(entries).__name__}")
+    return tuple(IndexedField.parse(e, kind) for e in entries)
+
+
+@dataclass(frozen=True)
+class Declaration:
+    """How O(d) acts on an env's observation, action and (optionally) MuJoCo state.
+
+    ``state`` maps ``qpos`` and ``qvel`` to their fields; without it the declaration
+    can train an agent but ``check_symmetry`` cannot test it.
+    """
+
+    dim: int
+    continuous_group: str
+    exact_group: str
+    observation: tuple[IndexedField, ...]
+    action: tuple[IndexedField, ...]
+    state: dict[str, tuple[IndexedField, ...]] | None = None
+    notes: str = ""
+
+    def __post_init__(self) -> None:
+        for group in (self.continuous_group, self.exact_group):
+            if groups.group_dim(group) != self.dim:
+                raise ValueError(f"group {group!r} does not act on R^{self.dim}")
+        if not groups.is_subgroup(self.exact_group, self.continuous_group):
+            raise ValueError(f"{self.exact_group} is not a subgroup of {self.continuous_group}")
+        for kind, fields in (("observation", self.observation), ("action", self.action)):
+            self._check_fields(kind, fields, REPRESENTATIONS)
+        if self.state is not None:
+            unknown = set(self.state) - set(STATE_VECTORS)
+            if unknown:
+                raise ValueError(f"state: unknown vector(s) {sorted(unknown)}; valid: "
+                                 f"{', '.join(STATE_VECTORS)}")
+            for name, fields in self.state.items():
+                self._check_fields(f"state.{name}", fields, STATE_REPRESENTATIONS)
+
+    def _check_fields(self, kind: str, fields: tuple[IndexedField, ...], reps: tuple[str, ...]) -> None:
+        for f in fields:
+            if f.rep not in reps:
+                raise ValueError(f"{kind} field {f.name!r}: unknown representation {f.rep!r}; "
+                                 f"valid: {', '.join(reps)}")
+            size = 1 if f.rep == "angle" else rep_size(f.rep, self.dim)
+            if f.rep == "angle" and self.dim != 2:
+                raise ValueError(f"{kind} field {f.name!r}: an angle is planar (dim 2)")
+            if len(f.index) != size:
+                raise ValueError(f"{kind} field {f.name!r}: a {f.rep} of R^{self.dim} has {size} "
+                                 f"coordinate(s), the index lists {len(f.index)}")
+
+    # --- plain data ---------------------------------------------------------------
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Declaration:
+        """From plain data (as YAML holds it); unknown keys are an error."""
+        data = dict(data)
+        allowed = {"dim", "continuous_group", "exact_group", "observation", "action", "state", "notes"}
+        unknown = set(data) - allowed
+        if unknown:
+            raise ValueError(f"declaration: unknown key(s) {sorted(unknown)}; "
+                             f"valid: {', '.join(sorted(allowed))}")
+        missing = {"dim", "continuous_group", "observation", "action"} - set(data)
+        if missing:
+            raise ValueError(f"declaration: missing key(s) {sorted(missing)}")
+        state = data.get("state")
+        if state is not None:
+            if not isinstance(state, Mapping):
+                raise ValueError("declaration: state must map qpos and qvel to their fields")
+            state = {k: _parse_fields(v, f"state.{k}") for k, v in state.items()}
+        return cls(dim=int(data["dim"]), continuous_group=data["continuous_group"],
+                   exact_group=data.get("exact_group", data["continuous_group"]),
+                   observation=_parse_fields(data["observation"], "observation"),
+                   action=_parse_fields(data["action"], "action"), state=state,
+                   notes=str(data.get("notes", "")))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data that ``from_dict`` (and YAML) reads back."""
+
+        def plain(fields: tuple[IndexedField, ...]) -> list[dict[str, Any]]:
+            return [{"name": f.name, "rep": f.rep, "index": list(f.index)} for f in fields]
+
+        out = {"dim": self.dim, "continuous_group": self.continuous_group,
+               "exact_group": self.exact_group, "observation": plain(self.observation),
+               "action": plain(self.action)}
+        if self.state is not None:
+            out["state"] = {k: plain(v) for k, v in self.state.items()}
+        if self.notes:
+            out["notes"] = self.notes
+        return out
+
+    # --- the contiguous layout the agent sees -------------------------------------------
+    def order(self, kind: str, size: int) -> np.ndarray:
+        """Indices of the env's ``kind`` vector in declaration order (a permutation of
+        range(size)), or an error naming the indices left out, repeated or out of range."""
+        fields = self.observation if kind == "observation" else self.action
+        return _coverage(kind, fields, size)
+
+    def symmetry(self, observation_size: int, action_size: int) -> Symmetry:
+        """The declaration as a ``Symmetry`` on the reordered vectors."""
+        self.order("observation", observation_size)
+        self.order("action", action_size)
+
+        def contiguous(fields: tuple[IndexedField, ...]) -> tuple[Field, ...]:
+            out, start = [], 0
+            for f in fields:
+                out.append(Field(f.name, f.rep, start, start + len(f.index)))
+                start += len(f.index)
+            return tuple(out)
+
+        return Symmetry(self.dim, self.continuous_group, self.exact_group,
+                        contiguous(self.observation), contiguous(self.action), notes=self.notes)
+
+    def transform_state(self, vectors: dict[str, np.ndarray], g: np.ndarray) -> dict[str, np.ndarray]:
+        """g applied to ``{"qpos": ..., "qvel": ...}`` field by field."""
+        if self.state is None:
+            raise ValueError("this declaration has no state: declare how qpos and qvel move "
+                             "(state={'qpos': [...], 'qvel': [...]}) to check it against the simulator")
+        g = groups.as_orthogonal(g, self.dim)
+        out = {name: np.array(v, dtype=np.float64) for name, v in vectors.items()}
+        for name, fields in self.state.items():
+            for f in fields:
+                index = list(f.index)
+                if f.rep == "angle":
+                    phi = vectors[name][index[0]]
+                    moved = g @ np.array([np.cos(phi), np.sin(phi)])
+                    out[name][index[0]] = np.arctan2(moved[1], moved[0])
+                else:
+                    out[name][index] = rep_matrix(f.rep, g) @ vectors[name][index]
+        return out
+
+
+def _coverage(kind: str, fields: tuple[IndexedField, ...], size: int) -> np.ndarray:
+    order = np.array([i for f in fields for i in f.index], dtype=np.int64)
+    bad = sorted({int(i) for i in order if not 0 <= i < size})
+    if bad:
+        raise ValueError(f"{kind} indices {bad} are out of range for a vector of size {size}")
+    repeated = sorted({int(i) for i in order if (order == i).sum() > 1})
+    if repeated:
+        raise ValueError(f"{kind} indices {repeated} belong to more than one field")
+    missing = sorted(set(range(size)) - set(order.tolist()))
+    if missing:
+        raise ValueError(f"{kind} indices {missing} belong to no field: declare every coordinate "
+                         "(an invariant one as rep: trivial)")
+    return order
+
+
+def shipped_declarations() -> tuple[str, ...]:
+    """Names of the declarations that ship with geomdp_envs."""
+    return tuple(sorted(p.name[: -len(".yaml")] for p in SHIPPED.iterdir() if p.name.endswith(".yaml")))
+
+
+def load_declaration(source: str | Path | Mapping[str, Any] | Declaration) -> Declaration:
+    """A declaration from a shipped name (``reacher_v5``), a YAML file, or plain data."""
+    if isinstance(source, Declaration):
+        return source
+    if isinstance(source, Mapping):
+        return Declaration.from_dict(source)
+    text = str(source)
+    if text in shipped_declarations():
+        data = yaml.safe_load((SHIPPED / f"{text}.yaml").read_text())
+    elif Path(text).is_file():
+        data = yaml.safe_load(Path(text).read_text())
+    else:
+        raise ValueError(f"symmetry declaration {text!r} is neither a YAML file nor a shipped "
+                         f"declaration ({', '.join(shipped_declarations())})")
+    if not isinstance(data, Mapping):
+        raise ValueError(f"symmetry declaration {text!r}: expected a mapping, got {type(data).__name__}")
+    return Declaration.from_dict(data)
+
+
+def _box(space: spaces.Space, order: np.ndarray, kind: str) -> spaces.Box:
+    if not isinstance(space, spaces.Box) or len(space.shape) != 1:
+        raise ValueError(f"{kind} space {space} is not a flat Box: a declaration indexes a vector")
+    return spaces.Box(space.low[order], space.high[order], dtype=space.dtype)
+
+
+@dataclass
+class _MujocoAccess:
+    """Reads and writes the state of a Gymnasium ``MujocoEnv`` (``env.unwrapped``)."""
+
+    env: Any
+    name: str
+    nq: int = field(init=False)
+    nv: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        missing = [a for a in ("model", "data", "set_state", "_get_obs", "do_simulation")
+                   if not hasattr(self.env, a)]
+        if missing:
+            raise TypeError(f"{self.name} is not a Gymnasium MujocoEnv (it lacks {', '.join(missing)}): "
+                            "check_symmetry needs to set a state g.s in the simulator, which this env "
+                            "does not allow")
+        self.nq, self.nv = int(self.env.model.nq), int(self.env.model.nv)
+
+
+class DeclaredEnv(gymnasium.Wrapper):
+    """A third-party env with a symmetry declaration, its vectors in declaration order.
+
+    The agent sends actions in declaration order and receives observations in it;
+    ``symmetry`` describes those reordered vectors. For a MuJoCo env whose state
+    the declaration covers, it also offers the state access ``check_symmetry`` uses
+    (get/set/sample/transform state, observe, simulate), as the built-in tasks do.
+    """
+
+    def __init__(self, env: gymnasium.Env, declaration: Declaration) -> None:
+        super().__init__(env)
+        self.declaration = declaration
+        name = env.spec.id if env.spec is not None else type(env.unwrapped).__name__
+        self.env_name = name
+        obs_space, act_space = env.observation_space, env.action_space
+        obs_size = _box(obs_space, np.arange(obs_space.shape[0] if obs_space.shape else 0),
+                        "observation").shape[0]
+        act_size = _box(act_space, np.arange(act_space.shape[0] if act_space.shape else 0),
+                        "action").shape[0]
+        try:
+            self.symmetry = declaration.symmetry(obs_size, act_size)
+        except ValueError as err:
+            raise ValueError(f"{name}: {err}") from None
+        self._obs_order = declaration.order("observation", obs_size)
+        self._action_order = declaration.order("action", act_size)
+        self.observation_space = _box(obs_space, self._obs_order, "observation")
+        self.action_space = _box(act_space, self._action_order, "action")
+        self._check_action_bounds()
+
+    def _check_action_bounds(self) -> None:
+        """The group must map the action box to itself after Gymnasium's rescaling:
+        signed fields need bounds symmetric about 0, vector fields one bound for all."""
+        low, high = self.action_space.low, self.action_space.high
+        for f in self.symmetry.action:
+            lo, hi = low[f.start:f.stop], high[f.start:f.stop]
+            if f.rep != "trivial" and not np.allclose(lo, -hi):
+                raise ValueError(f"{self.env_name}: action field {f.name!r} is {f.rep} but its bounds "
+                                 f"[{lo.tolist()}, {hi.tolist()}] are not symmetric about 0")
+            if f.size > 1 and not (np.allclose(lo, lo[0]) and np.allclose(hi, hi[0])):
+                raise ValueError(f"{self.env_name}: action field {f.name!r} is a {f.rep} but its "
+                                 "coordinates have different bounds")
+
+    # --- reordering ---------------------------------------------------------------
+    def to_declared_observation(self, observation: np.ndarray) -> np.ndarray:
+        """The env's observation in declaration order."""
+        return np.asarray(observation)[..., self._obs_order]
+
+    def to_env_action(self, action: np.ndarray) -> np.ndarray:
+        """An action in declaration order, as the env takes it."""
+        action = np.asarray(action)
+        out = np.empty_like(action)
+        out[..., self._action_order] = action
+        return out
+
+    def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        return self.to_declared_observation(obs), info
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(self.to_env_action(action))
+        return self.to_declared_observation(obs), reward, terminated, truncated, info
+
+    # --- state access for check_symmetry ----------------------------------------------
+    @property
+    def _mujoco(self) -> _MujocoAccess:
+        if self.declaration.state is None:
+            raise ValueError(f"{self.env_name}: the declaration has no state, so check_symmetry cannot "
+                             "move the simulator by g: declare how qpos and qvel transform "
+                             "(state={'qpos': [...], 'qvel': [...]})")
+        access = _MujocoAccess(self.env.unwrapped, self.env_name)
+        for name, size in (("qpos", access.nq), ("qvel", access.nv)):
+            try:
+                _coverage(f"state.{name}", self.declaration.state.get(name, ()), size)
+            except ValueError as err:
+                raise ValueError(f"{self.env_name}: {err}") from None
+        return access
+
+    def get_state(self) -> SimState:
+        data = self._mujoco.env.data
+        return SimState(data.qpos.copy(), data.qvel.copy())
+
+    def set_state(self, state: SimState) -> None:
+        """Sets qpos and qvel, and clears the solver's warm start so that two runs from
+        the same state are the same run."""
+        env = self._mujoco.env
+        env.data.qacc_warmstart[:] = 0
+        env.set_state(np.asarray(state.qpos, dtype=np.float64), np.asarray(state.qvel, dtype=np.float64))
+
+    def transform_state(self, state: SimState, g: np.ndarray,
+                        permutation: np.ndarray | None = None) -> SimState:
+        if permutation is not None:
+            raise ValueError(f"{self.env_name}: a declared env has no interchangeable particles")
+        moved = self.declaration.transform_state({"qpos": state.qpos, "qvel": state.qvel}, g)
+        return SimState(moved["qpos"], moved["qvel"])
+
+    def sample_state(self, rng: np.random.Generator) -> SimState:
+        """A state the env itself reaches: a reset, then a few random actions. The env's
+        own random generator is put back, so checking does not change its episodes."""
+        env = self._mujoco.env
+        saved_generator = env.np_random
+        try:
+            env.reset(seed=int(rng.integers(2**31)))
+            for action in self.symmetry.sample_action(rng, WARM_UP_STEPS):
+                env.step(self.to_env_action(self._scaled(action)))
+        finally:
+            env.np_random = saved_generator
+        return self.get_state()
+
+    def observe(self) -> np.ndarray:
+        return self.to_declared_observation(np.asarray(self._mujoco.env._get_obs(), dtype=np.float64))
+
+    def simulate(self, action: np.ndarray) -> tuple[np.ndarray, float]:
+        """One step of the bare env (no time limit), an action in ``ACTION_DOMAIN`` scaled
+        to the action box: (observation in declaration order, reward)."""
+        env = self._mujoco.env
+        obs, reward, *_ = env.step(self.to_env_action(self._scaled(action)))
+        return self.to_declared_observation(np.asarray(obs, dtype=np.float64)), float(reward)
+
+    def _scaled(self, action: np.ndarray) -> np.ndarray:
+        """An action of the unit domain as the env's (symmetric) box holds it; trivial
+        fields go to the middle of their range."""
+        low, high = self.action_space.low.astype(np.float64), self.action_space.high.astype(np.float64)
+        return (low + high) / 2 + np.asarray(action) * (high - low) / 2
+
+
+def declare(env: gymnasium.Env, declaration: str | Path | Mapping[str, Any] | Declaration | None = None,
+            **fields: Any) -> DeclaredEnv:
+    """``env`` with a symmetry declaration: a ``Declaration``, a shipped name or YAML path,
+    plain data, or its keys as keyword arguments (``observation=``, ``action=``, ``state=``,
+    ``dim=2``, ``continuous_group="O(2)"``, ``exact_group=``).
+
+    >>> env = declare(gymnasium.make("Reacher-v5"), "reacher_v5")
+    >>> env.symmetry.observation[0]  # Field('shoulder', 'vector', 0, 2): indices 0 and 2
+    """
+    if declaration is not None and fields:
+        raise TypeError("declare: give a declaration or its fields as keywords, not both")
+    if declaration is None:
+        declaration = Declaration.from_dict({"dim": 2, "continuous_group": "O(2)", **fields})
+    if getattr(env.unwrapped, "symmetry", None) is not None:
+        raise ValueError(f"{env.unwrapped} declares its own symmetry; declare() is for envs that do not")
+    return DeclaredEnv(env, load_declaration(declaration))
+
+
+def symmetry_of(env: gymnasium.Env) -> Symmetry | None:
+    """The symmetry an env declares (a built-in task's, or a ``declare`` wrapper's), looking
+    through wrappers; None if it declares none."""
+    current = env
+    while True:
+        if isinstance(current, DeclaredEnv):
+            return current.symmetry
+        if not isinstance(current, gymnasium.Wrapper):
+            return getattr(current, "symmetry", None)
+        current = current.env
+
+
+def declared_env(env: gymnasium.Env) -> DeclaredEnv | None:
+    """The ``declare`` wrapper inside ``env``'s wrappers, if there is one."""
+    current = env
+    while isinstance(current, gymnasium.Wrapper):
+        if isinstance(current, DeclaredEnv):
+            return current
+        current = current.env
+    return None

@@ -1,0 +1,233 @@
+"""Bring your own task: declarations of third-party envs, checked against MuJoCo."""
+
+import pathlib
+
+import gymnasium
+import numpy as np
+import pytest
+import yaml
+
+from geomdp_envs import check_symmetry, declare, groups, load_declaration, symmetry_of
+from geomdp_envs.declare import Declaration, shipped_declarations
+
+REACHER = load_declaration("reacher_v5")
+PENDULUM = load_declaration("inverted_pendulum_v5")
+
+
+def reacher(declaration=REACHER):
+    return declare(gymnasium.make("Reacher-v5"), declaration)
+
+
+def with_field(declaration, kind, name, **changes):
+    data = declaration.to_dict()
+    (entry,) = [f for f in data[kind] if f["name"] == name]
+    entry.update(changes)
+    return data
+
+
+@pytest.fixture(scope="module")
+def upright_pendulum_xml(tmp_path_factory):
+    """Gymnasium's inverted pendulum with its pole upright instead of tilted 1.7 mrad."""
+    source = pathlib.Path(gymnasium.__file__).parent / "envs/mujoco/assets/inverted_pendulum.xml"
+    text = source.read_text()
+    assert text.count('fromto="0 0 0 0.001 0 0.6"') == 1
+    path = tmp_path_factory.mktemp("xml") / "upright.xml"
+    path.write_text(text.replace('fromto="0 0 0 0.001 0 0.6"', 'fromto="0 0 0 0 0 0.6"'))
+    return str(path)
+
+
+def test_non_contiguous_fields_are_reordered_into_the_declared_layout():
+    env = reacher()
+    sym = env.symmetry
+    assert [(f.name, f.rep, f.start, f.stop) for f in sym.observation[:3]] == [
+        ("upper_arm_direction", "vector", 0, 2), ("cos_elbow", "trivial", 2, 3),
+        ("sin_elbow", "sign", 3, 4)]
+    raw_env = gymnasium.make("Reacher-v5")
+    obs, _ = env.reset(seed=3)
+    raw, _ = raw_env.reset(seed=3)
+    np.testing.assert_array_equal(obs, raw[[0, 2, 1, 3, 4, 5, 6, 7, 8, 9]])
+    # (cos q1, sin q1) is now one vector: rotating it by g is rotating the arm
+    assert env.observation_space.shape == (10,) and env.observation_space.contains(obs)
+    action = np.array([0.3, -0.7], dtype=np.float32)
+    np.testing.assert_array_equal(env.step(action)[0],
+                                  raw_env.step(action)[0][[0, 2, 1, 3, 4, 5, 6, 7, 8, 9]])
+
+
+def test_actions_are_reordered_back_for_the_env():
+    swapped = with_field(REACHER, "action", "shoulder_torque", index=1)
+    swapped["action"][1]["index"] = 0
+    env = reacher(swapped)
+    np.testing.assert_array_equal(env.to_env_action(np.array([1.0, 2.0])), [2.0, 1.0])
+    raw_env = gymnasium.make("Reacher-v5")
+    env.reset(seed=0)
+    raw_env.reset(seed=0)
+    obs = env.step(np.array([0.5, -0.25]))[0]
+    np.testing.assert_array_equal(obs, env.to_declared_observation(raw_env.step(np.array([-0.25, 0.5]))[0]))
+
+
+def test_the_reacher_v5_declaration_passes_on_o2_and_its_subgroups():
+    env = reacher()
+    for group in ("O(2)", "D8", "C4"):
+        report = check_symmetry(env, group=group, n_trials=16)
+        assert report.passed, str(report)
+        assert report.max_error < 1e-12
+
+
+@pytest.mark.parametrize("name, rep, culprit", [
+    ("shoulder_velocity", "trivial", "shoulder_velocity"),  # the sign trap
+    ("sin_elbow", "trivial", "sin_elbow"),
+    ("cos_elbow", "sign", "cos_elbow"),
+])
+def test_a_wrong_observation_field_fails_and_is_named(name, rep, culprit):
+    report = check_symmetry(reacher(with_field(REACHER, "observation", name, rep=rep)), n_trials=16)
+    assert not report.passed
+    assert report.failing_fields[0] == culprit and report.field_errors[culprit] > 1e-2
+    assert f"fields over tolerance: {culprit} " in str(report)
+
+
+def test_wrong_indices_and_a_wrong_action_are_caught():
+    # (cos q1, cos q2) is no vector: the observation itself is wrong
+    data = with_field(REACHER, "observation", "upper_arm_direction", index=[0, 1])
+    data = with_field(Declaration.from_dict(data), "observation", "cos_elbow", index=2)
+    report = check_symmetry(reacher(data), n_trials=16)
+    assert not report.passed and "upper_arm_direction" in report.failing_fields
+    # a torque declared invariant: obs(g.s) matches, the steps after it do not
+    report = check_symmetry(reacher(with_field(REACHER, "action", "shoulder_torque", rep="trivial")),
+                            n_trials=16)
+    assert report.max_observation_error < 1e-12 and report.max_next_observation_error > 1e-2
+    assert "the action declaration" in str(report)
+
+
+def test_a_wrong_state_declaration_fails():
+    data = REACHER.to_dict()
+    data["state"]["qpos"][0]["rep"] = "sign"  # the shoulder is an orientation, not a pseudo-scalar
+    report = check_symmetry(reacher(data), group="SO(2)", n_trials=16)
+    assert not report.passed and "upper_arm_direction" in report.failing_fields
+
+
+def test_inverted_pendulum_mirror_is_exact_only_for_an_upright_pole(upright_pendulum_xml):
+    assert PENDULUM.exact_group == "C1"  # the shipped model's pole is tilted
+    stock = declare(gymnasium.make("InvertedPendulum-v5"), PENDULUM)
+    report = check_symmetry(stock, group="D1", n_trials=16)
+    assert not report.passed and 1e-4 < report.max_error < 0.1, str(report)
+    assert report.max_observation_error == 0  # the mirror image of a state is observed exactly
+    assert check_symmetry(stock).passed  # on its exact group C1, trivially
+    upright = declare(gymnasium.make("InvertedPendulum-v5", xml_file=upright_pendulum_xml), PENDULUM)
+    report = check_symmetry(upright, group="D1", n_trials=16)
+    assert report.passed and report.max_error < 1e-12, str(report)
+    wrong = declare(gymnasium.make("InvertedPendulum-v5", xml_file=upright_pendulum_xml),
+                    with_field(PENDULUM, "observation", "pole_angle", rep="trivial"))
+    report = check_symmetry(wrong, group="D1", n_trials=16)
+    assert report.failing_fields[0] == "pole_angle"
+
+
+def test_checking_restores_the_env_and_its_random_generator():
+    env = reacher()
+    env.reset(seed=1)
+    before = env.get_state()
+    check_symmetry(env, n_trials=4)
+    after = env.get_state()
+    np.testing.assert_array_equal(before.qpos, after.qpos)
+    np.testing.assert_array_equal(before.qvel, after.qvel)
+    twin = reacher()
+    twin.reset(seed=1)
+    np.testing.assert_array_equal(env.reset()[0], twin.reset()[0])  # same next episode
+
+
+class LinePlant(gymnasium.Env):
+    """A 1D plant with no MuJoCo state to set: x' = x + a."""
+
+    def __init__(self, low=-1.0):
+        self.observation_space = gymnasium.spaces.Box(-np.inf, np.inf, (1,), np.float64)
+        self.action_space = gymnasium.spaces.Box(np.float32(low), np.float32(1), (1,), np.float32)
+        self.x = np.zeros(1)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.x = self.np_random.normal(size=1)
+        return self.x.copy(), {}
+
+    def step(self, action):
+        self.x = self.x + action
+        return self.x.copy(), -float(abs(self.x[0])), False, False, {}
+
+
+LINE = {"dim": 2, "continuous_group": "O(2)", "exact_group": "D1",
+        "observation": [{"name": "x", "rep": "sign", "index": 0}],
+        "action": [{"name": "push", "rep": "sign", "index": 0}]}
+
+
+def test_an_env_whose_state_cannot_be_set_gets_a_clear_error():
+    env = declare(LinePlant(), LINE)
+    with pytest.raises(ValueError, match="has no state, so check_symmetry cannot move the simulator"):
+        check_symmetry(env)
+    env = declare(LinePlant(), {**LINE, "state": {"qpos": [{"name": "x", "rep": "sign", "index": 0}]}})
+    with pytest.raises(TypeError, match="is not a Gymnasium MujocoEnv .*lacks model, data"):
+        check_symmetry(env)
+    assert symmetry_of(gymnasium.wrappers.ClipAction(env)) is env.symmetry  # still trains
+    with pytest.raises(TypeError, match="declares no symmetry: wrap it with geomdp_envs.declare"):
+        check_symmetry(LinePlant())
+
+
+def test_a_state_declaration_must_cover_qpos_and_qvel():
+    data = REACHER.to_dict()
+    del data["state"]["qvel"][2]
+    with pytest.raises(ValueError, match=r"Reacher-v5: state.qvel indices \[2, 3\] belong to no field"):
+        check_symmetry(reacher(data))
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d["observation"].pop(), r"observation indices \[8, 9\] belong to no field"),
+    (lambda d: d["observation"][1].update(index=0), r"observation indices \[0\] belong to more than one"),
+    (lambda d: d["observation"][1].update(index=12), r"observation indices \[12\] are out of range"),
+    (lambda d: d["observation"][0].update(index=[0]), "a vector of R\\^2 has 2 coordinate"),
+    (lambda d: d["observation"][0].update(rep="angle"), "unknown representation 'angle'; valid: trivial"),
+    (lambda d: d["observation"][0].update(index="0"), "index must be an int or a list of ints"),
+    (lambda d: d.update(colour="red"), r"unknown key\(s\) \['colour'\]"),
+    (lambda d: d.update(exact_group="D4", continuous_group="SO(2)"), "D4 is not a subgroup of SO\\(2\\)"),
+    (lambda d: d["state"].update(qacc=[]), r"state: unknown vector\(s\) \['qacc'\]; valid: qpos, qvel"),
+    (lambda d: d["observation"][0].pop("rep"), "needs exactly the keys name, rep, index"),
+])
+def test_bad_declarations_are_refused_with_the_problem_named(change, message):
+    data = REACHER.to_dict()
+    change(data)
+    with pytest.raises(ValueError, match=message):
+        reacher(data)
+
+
+def test_action_bounds_must_be_symmetric_for_signed_fields():
+    with pytest.raises(ValueError, match="'push' is sign but its bounds .* are not symmetric about 0"):
+        declare(LinePlant(low=0.0), LINE)
+
+
+def test_declare_refuses_a_task_that_declares_its_own_symmetry_and_double_specification():
+    with pytest.raises(ValueError, match="declares its own symmetry"):
+        declare(gymnasium.make("GeoMDP/Reacher-v0"), REACHER)
+    with pytest.raises(TypeError, match="not both"):
+        declare(gymnasium.make("Reacher-v5"), REACHER, dim=2)
+
+
+def test_keyword_declaration_tuples_and_yaml_files_give_the_same_declaration(tmp_path):
+    path = tmp_path / "reacher.yaml"
+    path.write_text(yaml.safe_dump(REACHER.to_dict()))
+    assert load_declaration(str(path)) == REACHER
+    as_tuples = {k: [(f.name, f.rep, list(f.index)) for f in getattr(REACHER, k)]
+                 for k in ("observation", "action")}
+    env = declare(gymnasium.make("Reacher-v5"), exact_group="O(2)", notes=REACHER.notes,
+                  state=REACHER.to_dict()["state"], **as_tuples)
+    assert env.declaration == REACHER
+    assert set(shipped_declarations()) >= {"reacher_v5", "inverted_pendulum_v5"}
+    with pytest.raises(ValueError, match="neither a YAML file nor a shipped declaration .*reacher_v5"):
+        load_declaration("reacher_v6")
+
+
+def test_state_transform_moves_the_arm_angle_as_an_orientation():
+    g = groups.rotation_2d(0.5)
+    moved = REACHER.transform_state({"qpos": np.array([0.25, 0.1, 0.1, 0.0]),
+                                     "qvel": np.array([1.0, 2.0, 0.0, 0.0])}, g)
+    np.testing.assert_allclose(moved["qpos"], [0.75, 0.1, 0.1 * np.cos(0.5), 0.1 * np.sin(0.5)])
+    mirror = np.diag([1.0, -1.0])
+    moved = REACHER.transform_state({"qpos": np.array([0.25, 0.1, 0.1, 0.2]),
+                                     "qvel": np.array([1.0, 2.0, 0.0, 0.0])}, mirror)
+    np.testing.assert_allclose(moved["qpos"], [-0.25, -0.1, 0.1, -0.2])
+    np.testing.assert_allclose(moved["qvel"], [-1.0, -2.0, 0.0, 0.0])
