@@ -6,7 +6,10 @@ import gymnasium
 import numpy as np
 import pytest
 import yaml
+from omegaconf import OmegaConf
+from test_train import config, rows
 
+from agents.cli.train import run
 from geomdp_envs import check_symmetry, declare, groups, load_declaration, symmetry_of
 from geomdp_envs.declare import Declaration, shipped_declarations
 
@@ -231,3 +234,57 @@ def test_state_transform_moves_the_arm_angle_as_an_orientation():
                                      "qvel": np.array([1.0, 2.0, 0.0, 0.0])}, mirror)
     np.testing.assert_allclose(moved["qpos"], [-0.25, -0.1, 0.1, -0.2])
     np.testing.assert_allclose(moved["qvel"], [-1.0, -2.0, 0.0, 0.0])
+
+
+# --- training an agent on a declared third-party env (geomdp-train env.symmetry=...) ------
+
+
+REACHER_V5 = ["env=gym", "env.id=Reacher-v5", "env.symmetry=reacher_v5", "env.action_repeat=2",
+              "train.steps=300", "train.seed_steps=100", "train.eval_every=300"]
+
+
+def test_equivariant_agent_trains_on_a_declared_third_party_env(tmp_path):
+    assert run(config(*REACHER_V5, "agent.group=D8"), tmp_path) == 0
+    assert OmegaConf.load(tmp_path / "config.yaml").env.symmetry == "reacher_v5"
+    assert [int(r["env_step"]) for r in rows(tmp_path / "eval.csv")] == [0, 300]
+    # 50-step episodes at action repeat 2: two random episodes (50 updates at the end of
+    # seeding, one per agent step of it), then an episode per 25 updates.
+    # It learned: Q starts at exactly 0 (a zero output layer) and moves toward the TD
+    # targets, which are negative (Reacher-v5's reward is -distance - |action|^2).
+    train = rows(tmp_path / "train.csv")[1:]
+    assert [int(r["updates"]) for r in train] == [50, 25, 25, 25, 25]
+    q = [float(r["q_mean"]) for r in train]
+    assert q[-1] < q[0] < 0 and all(float(r["td_target_mean"]) < 0 for r in train), train
+    # the checkpoint holds D8-equivariant networks and the run continues from it
+    assert run(config(*REACHER_V5, "agent.group=D8", "train.steps=400"), tmp_path) == 0
+    assert [int(r["env_step"]) for r in rows(tmp_path / "eval.csv")][-1] == 400
+
+
+def test_reflection_agent_and_augmentation_on_the_inverted_pendulum(tmp_path):
+    pendulum = ["env=gym", "env.id=InvertedPendulum-v5", "env.symmetry=inverted_pendulum_v5",
+                "env.action_repeat=1", "train.steps=200", "train.seed_steps=100", "train.eval_every=200"]
+    with pytest.warns(UserWarning, match="D1 is only an approximate symmetry of InvertedPendulum-v5 "
+                                         r"\(exact group: C1\)"):
+        assert run(config(*pendulum, "agent.group=D1"), tmp_path / "d1") == 0
+    assert rows(tmp_path / "d1/train.csv")[-1]["q_mean"] != "0.0"
+    # a plain agent with replay moved by the exact group (here trivial, C1): runs, no-op
+    assert run(config(*pendulum, "agent.augment=auto"), tmp_path / "aug") == 0
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["env.symmetry=reacher_v6"], "env.symmetry: symmetry declaration 'reacher_v6' is neither a YAML "
+                                  "file nor a shipped declaration"),
+    (["env.id=Pendulum-v1", "env.symmetry=reacher_v5"],
+     "env.symmetry: Pendulum-v1: observation indices [3, 4, 5, 6, 7, 8, 9] are out of range"),
+    (["env.id=InvertedPendulum-v5", "agent.group=O2"],
+     "O2 is only an approximate symmetry of InvertedPendulum-v5 (exact group: C1); set "
+     "agent.allow_approximate=true"),
+])
+def test_bad_declarations_on_the_command_line_give_one_line(tmp_path, capsys, overrides, message):
+    base = ["env=gym", "env.id=Reacher-v5", "env.symmetry=reacher_v5"]
+    if "env.id=InvertedPendulum-v5" in overrides:
+        base[2] = "env.symmetry=inverted_pendulum_v5"
+    assert run(config(*base, *overrides), tmp_path / "run") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "run").exists()

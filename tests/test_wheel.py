@@ -38,6 +38,10 @@ def test_wheel_holds_every_package_and_config(wheel):
     assert configs
     for config in configs:
         assert f"agents/configs/{config.relative_to(ROOT / 'configs')}" in names, config
+    declarations = sorted((ROOT / "geomdp_envs" / "declarations").glob("*.yaml"))
+    assert declarations
+    for declaration in declarations:
+        assert str(declaration.relative_to(ROOT)) in names, declaration
 
 
 def test_installed_commands_work_outside_the_checkout(wheel, tmp_path):
@@ -48,7 +52,8 @@ def test_installed_commands_work_outside_the_checkout(wheel, tmp_path):
     # one process: where the code comes from, and every command's entry point imports
     where = subprocess.run([sys.executable, "-c", "import agents.cli.train as t; print(t.__file__); "
                             "print(t.CONFIG_DIR); from agents.cli.plot import main; "
-                            "from agents.cli.theory import main; from geomdp_envs.demo import main"],
+                            "from agents.cli.theory import main; from geomdp_envs.demo import main; "
+                            "from geomdp_envs import load_declaration; load_declaration('reacher_v5')"],
                            cwd=tmp_path, env=env, capture_output=True, text=True, check=True)
     module, config_dir = where.stdout.split()
     assert module.startswith(str(target)) and config_dir == str(target / "agents" / "configs")
