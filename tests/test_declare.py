@@ -11,6 +11,7 @@ from test_train import config, rows
 
 from agents.cli.train import run
 from geomdp_envs import check_symmetry, declare, groups, load_declaration, symmetry_of
+from geomdp_envs.check_cli import main as check_main
 from geomdp_envs.declare import Declaration, shipped_declarations
 
 REACHER = load_declaration("reacher_v5")
@@ -288,3 +289,21 @@ def test_bad_declarations_on_the_command_line_give_one_line(tmp_path, capsys, ov
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0], err
     assert not (tmp_path / "run").exists()
+
+
+def test_geomdp_check_reports_and_exits_by_verdict(tmp_path, capsys, upright_pendulum_xml):
+    assert check_main(["Reacher-v5", "reacher_v5", "--group", "O(2)", "D8", "--trials", "8"]) == 0
+    out = capsys.readouterr().out
+    assert "| observation | [0:2] | upper_arm_direction | vector |" in out
+    assert "PASS O(2): 8 trials" in out and "PASS D8: 8 trials" in out
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text(yaml.safe_dump(with_field(PENDULUM, "observation", "pole_angle", rep="trivial")))
+    assert check_main(["InvertedPendulum-v5", str(wrong), "--group", "D1", "--trials", "8",
+                       "--kwarg", f"xml_file={upright_pendulum_xml}"]) == 1
+    assert "fields over tolerance: pole_angle" in capsys.readouterr().out
+    for argv, message in [(["Pendulum-v1"], "Pendulum-v1 declares no symmetry: give a declaration"),
+                          (["Reacher-v5", "reacher_v5", "--group", "Q3"], "unknown group 'Q3'"),
+                          (["Reacher-v6", "reacher_v5"], "unknown environment 'Reacher-v6'")]:
+        assert check_main(argv) == 2
+        (line,) = capsys.readouterr().err.strip().splitlines()
+        assert line.startswith("geomdp-check: error: ") and message in line

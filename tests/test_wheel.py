@@ -53,11 +53,12 @@ def test_installed_commands_work_outside_the_checkout(wheel, tmp_path):
     where = subprocess.run([sys.executable, "-c", "import agents.cli.train as t; print(t.__file__); "
                             "print(t.CONFIG_DIR); from agents.cli.plot import main; "
                             "from agents.cli.theory import main; from geomdp_envs.demo import main; "
-                            "from geomdp_envs import load_declaration; load_declaration('reacher_v5')"],
+                            "from geomdp_envs import load_declaration; load_declaration('reacher_v5'); "
+                            "from geomdp_envs.check_cli import main"],
                            cwd=tmp_path, env=env, capture_output=True, text=True, check=True)
     module, config_dir = where.stdout.split()
     assert module.startswith(str(target)) and config_dir == str(target / "agents" / "configs")
-    for command in ("geomdp-train", "geomdp-plot", "geomdp-theory", "geomdp-demo"):
+    for command in ("geomdp-train", "geomdp-plot", "geomdp-theory", "geomdp-demo", "geomdp-check"):
         assert (target / "bin" / command).exists(), command
     job = subprocess.run([str(target / "bin" / "geomdp-train"), "env=reacher", "agent.group=D8",
                           "--cfg", "job"], cwd=tmp_path, env=env, capture_output=True, text=True,
