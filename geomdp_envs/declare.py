@@ -29,7 +29,7 @@ from gymnasium import spaces
 
 from geomdp_envs import groups
 from geomdp_envs.mujoco_env import SimState
-from geomdp_envs.symmetry import REPRESENTATIONS, Field, Symmetry, rep_matrix, rep_size
+from geomdp_envs.symmetry import REPRESENTATIONS, Field, Symmetry, check_groups, rep_matrix, rep_size
 
 # A planar orientation angle phi (an absolute hinge about the plane's normal): g moves
 # it to the angle of g (cos phi, sin phi). Only the state has these; observations show
@@ -93,11 +93,7 @@ class Declaration:
     notes: str = ""
 
     def __post_init__(self) -> None:
-        for group in (self.continuous_group, self.exact_group):
-            if groups.group_dim(group) != self.dim:
-                raise ValueError(f"group {group!r} does not act on R^{self.dim}")
-        if not groups.is_subgroup(self.exact_group, self.continuous_group):
-            raise ValueError(f"{self.exact_group} is not a subgroup of {self.continuous_group}")
+        check_groups(self.dim, self.continuous_group, self.exact_group)
         for kind, fields in (("observation", self.observation), ("action", self.action)):
             self._check_fields(kind, fields, REPRESENTATIONS)
         if self.state is not None:

@@ -108,6 +108,15 @@ def _permutation_matrix(fields: tuple[Field, ...], size: int, perm: np.ndarray) 
     return out
 
 
+def check_groups(dim: int, continuous_group: str, exact_group: str) -> None:
+    """Both groups act on R^dim and the exact one lies in the continuous one."""
+    for group in (continuous_group, exact_group):
+        if groups.group_dim(group) != dim:
+            raise ValueError(f"group {group!r} does not act on R^{dim}")
+    if not groups.is_subgroup(exact_group, continuous_group):
+        raise ValueError(f"{exact_group} is not a subgroup of {continuous_group}")
+
+
 @dataclass(frozen=True)
 class Symmetry:
     """How a group of rotations/reflections acts on a task's observations and actions.
@@ -129,11 +138,7 @@ class Symmetry:
     action_domain: str = field(default=ACTION_DOMAIN)
 
     def __post_init__(self) -> None:
-        for group in (self.continuous_group, self.exact_group):
-            if groups.group_dim(group) != self.dim:
-                raise ValueError(f"group {group!r} does not act on R^{self.dim}")
-        if not groups.is_subgroup(self.exact_group, self.continuous_group):
-            raise ValueError(f"{self.exact_group} is not a subgroup of {self.continuous_group}")
+        check_groups(self.dim, self.continuous_group, self.exact_group)
         for kind, fields in (("observation", self.observation), ("action", self.action)):
             start = 0
             for f in fields:
