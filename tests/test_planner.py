@@ -7,7 +7,7 @@ import torch
 
 from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
 from agents.tdmpc.planner import NoiseSource
-from geomdp_envs import groups
+from geomdp_envs import declare, groups, symmetry_of
 
 
 class RecordingNoise(NoiseSource):
@@ -46,9 +46,15 @@ def make_agent(randomise_heads):
     return lambda env_id, kwargs, group: _make_agent(env_id, kwargs, group, randomise_heads)
 
 
+# third-party envs, with the declaration they are trained with (geomdp_envs.declare)
+DECLARED = {"Reacher-v5": "reacher_v5", "InvertedPendulum-v5": "inverted_pendulum_v5"}
+
+
 def _make_agent(env_id, kwargs, group, randomise_heads):
     env = gymnasium.make(env_id, **kwargs)
-    sym = env.unwrapped.symmetry
+    if env_id in DECLARED:
+        env = declare(env, DECLARED[env_id])
+    sym = symmetry_of(env)
     cfg = TDMPCConfig.from_dict({
         "group": group, "networks": {"hidden_dim": 32, "latent_dim": 16},
         "planner": {"num_samples": 64, "num_elites": 8, "num_pi_trajs": 8, "iterations": 3},
@@ -71,6 +77,8 @@ def plan_twice(agent, obs, noise):
     ("GeoMDP/Reacher-v0", {}, "D4", np.diag([1.0, -1])),
     ("GeoMDP/PointMass3D-v0", {"n_balls": 2}, "octahedral", None),
     ("GeoMDP/PointMass3D-v0", {}, "icosahedral", None),
+    ("Reacher-v5", {}, "D8", groups.rotation_2d(np.pi / 4) @ np.diag([1.0, -1])),
+    ("InvertedPendulum-v5", {}, "D1", np.diag([1.0, -1])),
 ])
 def test_planner_is_equivariant(env_id, kwargs, group, element, make_agent):
     env, sym, agent = make_agent(env_id, kwargs, group)
