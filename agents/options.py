@@ -66,6 +66,9 @@ def _check_type(name: str, expected: Any, value: Any) -> None:
         allowed = [t for t in options if t is not type(None)]
         if any(t in _KINDS and _KINDS[t][1](value) for t in allowed):
             return
+        if len(allowed) > 1 and not isinstance(value, Mapping):  # none of several kinds fits
+            kinds = ["a mapping" if typing.get_origin(t) is dict else _KINDS[t][0] for t in allowed]
+            raise OptionError(f"{name} must be {' or '.join(kinds)}, got {value!r}")
         expected = allowed[0]
     if typing.get_origin(expected) is dict:
         if not isinstance(value, Mapping):

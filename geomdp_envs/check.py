@@ -96,6 +96,8 @@ def check_symmetry(
         permute_particles: also relabel interchangeable particles at random.
         tolerance: largest absolute error that counts as a pass.
     """
+    if n_trials < 1 or n_steps < 1:
+        raise ValueError(f"n_trials and n_steps must be at least 1, got {n_trials} and {n_steps}")
     base = _simulator(env)
     symmetry = symmetry or base.symmetry
     rng = np.random.default_rng(seed)

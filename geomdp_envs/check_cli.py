@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
                                     seed=args.seed, tolerance=args.tolerance)
             print(report)
             failed |= not report.passed
-    except (ValueError, TypeError) as err:
+    except (ValueError, TypeError, OSError) as err:  # OSError: gymnasium.make(xml_file=<missing>)
         print(f"geomdp-check: error: {err}", file=sys.stderr)
         return 2
     return 1 if failed else 0

@@ -38,6 +38,10 @@ STATE_REPRESENTATIONS = REPRESENTATIONS + ("angle",)
 STATE_VECTORS = ("qpos", "qvel")
 SHIPPED = resources.files("geomdp_envs") / "declarations"
 WARM_UP_STEPS = 5  # random actions after reset, so that sampled states move
+# The wrappers gymnasium.make adds, which change no observation or action: the checker
+# steps the bare env, so any other wrapper under ``declare`` would go unchecked.
+BOOKKEEPING_WRAPPERS = (gymnasium.wrappers.TimeLimit, gymnasium.wrappers.OrderEnforcing,
+                        gymnasium.wrappers.PassiveEnvChecker)
 
 
 @dataclass(frozen=True)
@@ -63,11 +67,14 @@ class IndexedField:
         else:
             raise ValueError(f"{kind} field {entry!r}: write it as {{name, rep, index}} or "
                              "(name, rep, index)")
-        index = (index,) if isinstance(index, int) else tuple(index)
-        if not index or not all(isinstance(i, int) and not isinstance(i, bool) for i in index):
-            raise ValueError(f"{kind} field {name!r}: index must be an int or a list of ints, "
-                             f"got {index!r}")
-        return cls(str(name), str(rep), index)
+        if not isinstance(name, str) or not isinstance(rep, str):
+            raise ValueError(f"{kind} field {entry!r}: name and rep must be strings")
+        items = [index] if isinstance(index, int) else index
+        if (not isinstance(items, Sequence) or isinstance(items, str) or not items
+                or not all(isinstance(i, int) and not isinstance(i, bool) for i in items)):
+            raise ValueError(f"{kind} field {name!r}: index must be an int or a non-empty list of "
+                             f"ints, got {index!r}")
+        return cls(name, rep, tuple(items))
 
 
 def _parse_fields(entries: Any, kind: str) -> tuple[IndexedField, ...]:
@@ -93,18 +100,35 @@ class Declaration:
     notes: str = ""
 
     def __post_init__(self) -> None:
+        if not isinstance(self.dim, int) or isinstance(self.dim, bool) or self.dim not in (2, 3):
+            raise ValueError(f"declaration: dim must be 2 or 3, got {self.dim!r}")
+        for key in ("continuous_group", "exact_group"):
+            if not isinstance(getattr(self, key), str):
+                raise ValueError(f"declaration: {key} must be a group name such as O(2), "
+                                 f"got {getattr(self, key)!r}")
         check_groups(self.dim, self.continuous_group, self.exact_group)
-        for kind, fields in (("observation", self.observation), ("action", self.action)):
-            self._check_fields(kind, fields, REPRESENTATIONS)
+        # fields given as tuples or dicts (building a Declaration directly) are parsed here
+        for kind in ("observation", "action"):
+            object.__setattr__(self, kind, _parse_fields(getattr(self, kind), kind))
+            self._check_fields(kind, getattr(self, kind), REPRESENTATIONS)
         if self.state is not None:
+            if not isinstance(self.state, Mapping):
+                raise ValueError("declaration: state must map qpos and qvel to their fields")
             unknown = set(self.state) - set(STATE_VECTORS)
             if unknown:
                 raise ValueError(f"state: unknown vector(s) {sorted(unknown)}; valid: "
                                  f"{', '.join(STATE_VECTORS)}")
-            for name, fields in self.state.items():
+            state = {name: _parse_fields(fields, f"state.{name}") for name, fields in self.state.items()}
+            object.__setattr__(self, "state", state)
+            for name, fields in state.items():
                 self._check_fields(f"state.{name}", fields, STATE_REPRESENTATIONS)
 
     def _check_fields(self, kind: str, fields: tuple[IndexedField, ...], reps: tuple[str, ...]) -> None:
+        names = [f.name for f in fields]
+        repeated = sorted({n for n in names if names.count(n) > 1})
+        if repeated:
+            raise ValueError(f"{kind}: field name(s) {repeated} used twice; each field needs its own "
+                             "name (the check reports errors by name)")
         for f in fields:
             if f.rep not in reps:
                 raise ValueError(f"{kind} field {f.name!r}: unknown representation {f.rep!r}; "
@@ -129,15 +153,9 @@ class Declaration:
         missing = {"dim", "continuous_group", "observation", "action"} - set(data)
         if missing:
             raise ValueError(f"declaration: missing key(s) {sorted(missing)}")
-        state = data.get("state")
-        if state is not None:
-            if not isinstance(state, Mapping):
-                raise ValueError("declaration: state must map qpos and qvel to their fields")
-            state = {k: _parse_fields(v, f"state.{k}") for k, v in state.items()}
-        return cls(dim=int(data["dim"]), continuous_group=data["continuous_group"],
+        return cls(dim=data["dim"], continuous_group=data["continuous_group"],
                    exact_group=data.get("exact_group", data["continuous_group"]),
-                   observation=_parse_fields(data["observation"], "observation"),
-                   action=_parse_fields(data["action"], "action"), state=state,
+                   observation=data["observation"], action=data["action"], state=data.get("state"),
                    notes=str(data.get("notes", "")))
 
     def to_dict(self) -> dict[str, Any]:
@@ -224,12 +242,17 @@ def load_declaration(source: str | Path | Mapping[str, Any] | Declaration) -> De
         return Declaration.from_dict(source)
     text = str(source)
     if text in shipped_declarations():
-        data = yaml.safe_load((SHIPPED / f"{text}.yaml").read_text())
+        path = SHIPPED / f"{text}.yaml"
     elif Path(text).is_file():
-        data = yaml.safe_load(Path(text).read_text())
+        path = Path(text)
     else:
         raise ValueError(f"symmetry declaration {text!r} is neither a YAML file nor a shipped "
                          f"declaration ({', '.join(shipped_declarations())})")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise ValueError(f"symmetry declaration {text!r} cannot be read: "
+                         f"{' '.join(str(err).split())}") from None
     if not isinstance(data, Mapping):
         raise ValueError(f"symmetry declaration {text!r}: expected a mapping, got {type(data).__name__}")
     return Declaration.from_dict(data)
@@ -258,6 +281,9 @@ class _MujocoAccess:
                             "check_symmetry needs to set a state g.s in the simulator, which this env "
                             "does not allow")
         self.nq, self.nv = int(self.env.model.nq), int(self.env.model.nv)
+        if self.env.model.na:
+            raise ValueError(f"{self.name} has {self.env.model.na} actuator activation state(s), "
+                             "which a declaration does not cover: check_symmetry cannot move them")
 
 
 class DeclaredEnv(gymnasium.Wrapper):
@@ -329,6 +355,13 @@ class DeclaredEnv(gymnasium.Wrapper):
             raise ValueError(f"{self.env_name}: the declaration has no state, so check_symmetry cannot "
                              "move the simulator by g: declare how qpos and qvel transform "
                              "(state={'qpos': [...], 'qvel': [...]})")
+        inner = self.env
+        while isinstance(inner, gymnasium.Wrapper):
+            if not isinstance(inner, BOOKKEEPING_WRAPPERS):
+                raise ValueError(f"{self.env_name}: {type(inner).__name__} sits between declare() and "
+                                 "the env, and check_symmetry steps the bare env, so it would check "
+                                 "something else than what the agent sees: apply it outside declare()")
+            inner = inner.env
         access = _MujocoAccess(self.env.unwrapped, self.env_name)
         for name, size in (("qpos", access.nq), ("qvel", access.nv)):
             try:
@@ -338,14 +371,21 @@ class DeclaredEnv(gymnasium.Wrapper):
         return access
 
     def get_state(self) -> SimState:
+        """qpos and qvel, plus the simulation time and controls (kept unmoved by g, and
+        put back when check_symmetry restores the env)."""
         data = self._mujoco.env.data
-        return SimState(data.qpos.copy(), data.qvel.copy())
+        return SimState(data.qpos.copy(), data.qvel.copy(),
+                        {"time": np.array([data.time]), "ctrl": data.ctrl.copy()})
 
     def set_state(self, state: SimState) -> None:
-        """Sets qpos and qvel, and clears the solver's warm start so that two runs from
-        the same state are the same run."""
+        """Sets qpos, qvel (and time, controls when given), and clears the solver's warm
+        start so that two runs from the same state are the same run."""
         env = self._mujoco.env
         env.data.qacc_warmstart[:] = 0
+        if "time" in state.task:
+            env.data.time = float(state.task["time"][0])
+        if "ctrl" in state.task:
+            env.data.ctrl[:] = state.task["ctrl"]
         env.set_state(np.asarray(state.qpos, dtype=np.float64), np.asarray(state.qvel, dtype=np.float64))
 
     def transform_state(self, state: SimState, g: np.ndarray,
@@ -353,19 +393,20 @@ class DeclaredEnv(gymnasium.Wrapper):
         if permutation is not None:
             raise ValueError(f"{self.env_name}: a declared env has no interchangeable particles")
         moved = self.declaration.transform_state({"qpos": state.qpos, "qvel": state.qvel}, g)
-        return SimState(moved["qpos"], moved["qvel"])
+        return SimState(moved["qpos"], moved["qvel"], dict(state.task))
 
     def sample_state(self, rng: np.random.Generator) -> SimState:
         """A state the env itself reaches: a reset, then a few random actions. The env's
         own random generator is put back, so checking does not change its episodes."""
         env = self._mujoco.env
-        saved_generator = env.np_random
+        saved_generator, saved_seed = env.np_random, env.np_random_seed
         try:
             env.reset(seed=int(rng.integers(2**31)))
             for action in self.symmetry.sample_action(rng, WARM_UP_STEPS):
                 env.step(self.to_env_action(self._scaled(action)))
         finally:
             env.np_random = saved_generator
+            env._np_random_seed = saved_seed  # the setter above records -1 (unknown seed)
         return self.get_state()
 
     def observe(self) -> np.ndarray:
@@ -379,8 +420,8 @@ class DeclaredEnv(gymnasium.Wrapper):
         return self.to_declared_observation(np.asarray(obs, dtype=np.float64)), float(reward)
 
     def _scaled(self, action: np.ndarray) -> np.ndarray:
-        """An action of the unit domain as the env's (symmetric) box holds it; trivial
-        fields go to the middle of their range."""
+        """An action of the unit domain [-1, 1] mapped affinely onto the env's action box
+        (for signed fields, whose box is symmetric, that is a scaling)."""
         low, high = self.action_space.low.astype(np.float64), self.action_space.high.astype(np.float64)
         return (low + high) / 2 + np.asarray(action) * (high - low) / 2
 
@@ -398,8 +439,8 @@ def declare(env: gymnasium.Env, declaration: str | Path | Mapping[str, Any] | De
         raise TypeError("declare: give a declaration or its fields as keywords, not both")
     if declaration is None:
         declaration = Declaration.from_dict({"dim": 2, "continuous_group": "O(2)", **fields})
-    if getattr(env.unwrapped, "symmetry", None) is not None:
-        raise ValueError(f"{env.unwrapped} declares its own symmetry; declare() is for envs that do not")
+    if symmetry_of(env) is not None:
+        raise ValueError(f"{env.unwrapped} declares a symmetry already; declare() is for envs that do not")
     return DeclaredEnv(env, load_declaration(declaration))
 
 

@@ -186,11 +186,24 @@ def test_a_state_declaration_must_cover_qpos_and_qvel():
     (lambda d: d["observation"][1].update(index=12), r"observation indices \[12\] are out of range"),
     (lambda d: d["observation"][0].update(index=[0]), "a vector of R\\^2 has 2 coordinate"),
     (lambda d: d["observation"][0].update(rep="angle"), "unknown representation 'angle'; valid: trivial"),
-    (lambda d: d["observation"][0].update(index="0"), "index must be an int or a list of ints"),
+    (lambda d: d["observation"][0].update(index="0"), "index must be an int or a non-empty list of ints"),
     (lambda d: d.update(colour="red"), r"unknown key\(s\) \['colour'\]"),
     (lambda d: d.update(exact_group="D4", continuous_group="SO(2)"), "D4 is not a subgroup of SO\\(2\\)"),
     (lambda d: d["state"].update(qacc=[]), r"state: unknown vector\(s\) \['qacc'\]; valid: qpos, qvel"),
     (lambda d: d["observation"][0].pop("rep"), "needs exactly the keys name, rep, index"),
+    (lambda d: d["observation"][5].update(name="shoulder_velocity"),
+     r"observation: field name\(s\) \['shoulder_velocity'\] used twice"),
+    (lambda d: d.update(dim="two"), "dim must be 2 or 3, got 'two'"),
+    (lambda d: d.update(dim=2.7), "dim must be 2 or 3, got 2.7"),
+    (lambda d: d.update(dim=[2]), r"dim must be 2 or 3, got \[2\]"),
+    (lambda d: d.update(continuous_group=2), "continuous_group must be a group name such as O\\(2\\), got 2"),
+    (lambda d: d.update(exact_group=None), "exact_group must be a group name"),
+    (lambda d: d["observation"][1].update(index=1.0), "index must be an int or a non-empty list of ints"),
+    (lambda d: d["observation"][1].update(index=None), "index must be an int or a non-empty list of ints"),
+    (lambda d: d["observation"][1].update(index="12"), "index must be an int or a non-empty list of ints"),
+    (lambda d: d["observation"][1].update(index=[]), "index must be an int or a non-empty list of ints"),
+    (lambda d: d["observation"][1].update(rep=3), "name and rep must be strings"),
+    (lambda d: d.update(state=[1]), "state must map qpos and qvel to their fields"),
 ])
 def test_bad_declarations_are_refused_with_the_problem_named(change, message):
     data = REACHER.to_dict()
@@ -205,7 +218,7 @@ def test_action_bounds_must_be_symmetric_for_signed_fields():
 
 
 def test_declare_refuses_a_task_that_declares_its_own_symmetry_and_double_specification():
-    with pytest.raises(ValueError, match="declares its own symmetry"):
+    with pytest.raises(ValueError, match="declares a symmetry already"):
         declare(gymnasium.make("GeoMDP/Reacher-v0"), REACHER)
     with pytest.raises(TypeError, match="not both"):
         declare(gymnasium.make("Reacher-v5"), REACHER, dim=2)
@@ -277,6 +290,8 @@ def test_reflection_agent_and_augmentation_on_the_inverted_pendulum(tmp_path):
                                   "file nor a shipped declaration"),
     (["env.id=Pendulum-v1", "env.symmetry=reacher_v5"],
      "env.symmetry: Pendulum-v1: observation indices [3, 4, 5, 6, 7, 8, 9] are out of range"),
+    (["env.symmetry=5"], "env.symmetry must be a mapping or a string, got 5"),
+    (["env.id=InvertedPendulum-v5", "+env.xml_file=/nowhere/pendulum.xml"], "/nowhere/pendulum.xml"),
     (["env.id=InvertedPendulum-v5", "agent.group=O2"],
      "O2 is only an approximate symmetry of InvertedPendulum-v5 (exact group: C1); set "
      "agent.allow_approximate=true"),
@@ -303,7 +318,42 @@ def test_geomdp_check_reports_and_exits_by_verdict(tmp_path, capsys, upright_pen
     assert "fields over tolerance: pole_angle" in capsys.readouterr().out
     for argv, message in [(["Pendulum-v1"], "Pendulum-v1 declares no symmetry: give a declaration"),
                           (["Reacher-v5", "reacher_v5", "--group", "Q3"], "unknown group 'Q3'"),
-                          (["Reacher-v6", "reacher_v5"], "unknown environment 'Reacher-v6'")]:
+                          (["Reacher-v6", "reacher_v5"], "unknown environment 'Reacher-v6'"),
+                          (["InvertedPendulum-v5", "inverted_pendulum_v5", "--kwarg",
+                            "xml_file=/nowhere/pendulum.xml"], "/nowhere/pendulum.xml"),
+                          (["Reacher-v5", "reacher_v5", "--trials", "0"], "n_trials and n_steps")]:
         assert check_main(argv) == 2
         (line,) = capsys.readouterr().err.strip().splitlines()
         assert line.startswith("geomdp-check: error: ") and message in line
+
+
+def test_unreadable_declarations_and_direct_construction(tmp_path):
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("dim: 2\nobservation: [ {name: x\n")
+    with pytest.raises(ValueError, match="symmetry declaration .*broken.yaml' cannot be read: while parsing"):
+        load_declaration(str(broken))
+    direct = Declaration(2, "O(2)", "D1", observation=[("x", "sign", 0)], action=[("push", "sign", 0)])
+    assert direct.observation[0].index == (0,)  # tuples are parsed as from_dict's fields are
+    assert declare(LinePlant(), direct).symmetry.observation_size == 1
+
+
+def test_a_wrapper_under_declare_is_refused_by_the_check():
+    swap = gymnasium.wrappers.TransformObservation(gymnasium.make("Reacher-v5"), lambda o: o[::-1], None)
+    env = declare(swap, REACHER)
+    with pytest.raises(ValueError, match="TransformObservation sits between declare\\(\\) and the env"):
+        check_symmetry(env)
+    with pytest.raises(ValueError, match="declares a symmetry already"):
+        declare(env, REACHER)
+    with pytest.raises(ValueError, match="n_trials and n_steps must be at least 1, got 0 and 3"):
+        check_symmetry(reacher(), n_trials=0)
+
+
+def test_checking_keeps_the_seed_record_time_and_controls():
+    env = reacher()
+    env.reset(seed=7)
+    env.step(np.array([0.5, -0.5]))
+    data = env.unwrapped.data
+    time, ctrl = data.time, data.ctrl.copy()
+    check_symmetry(env, n_trials=2)
+    assert env.unwrapped.np_random_seed == 7
+    assert data.time == time and np.array_equal(data.ctrl, ctrl)

@@ -32,7 +32,7 @@ def make_gym_env(env: EnvOptions, render_mode: str | None = None) -> gymnasium.E
     kwargs = dict(env.kwargs) | ({"render_mode": render_mode} if render_mode else {})
     try:
         gym_env = gymnasium.make(env.id, **kwargs)
-    except (ValueError, TypeError) as err:
+    except (ValueError, TypeError, OSError) as err:  # OSError: a missing xml_file
         raise OptionError(str(err)) from None
     if not isinstance(gym_env.action_space, gymnasium.spaces.Box):
         raise OptionError(f"{env.id} has a {type(gym_env.action_space).__name__} action space; "
@@ -40,7 +40,7 @@ def make_gym_env(env: EnvOptions, render_mode: str | None = None) -> gymnasium.E
     if env.symmetry is not None:
         try:
             gym_env = declare(gym_env, env.symmetry)
-        except ValueError as err:
+        except (ValueError, TypeError) as err:
             raise OptionError(f"env.symmetry: {err}") from None
     space = gym_env.observation_space
     if isinstance(space, gymnasium.spaces.Box) and space.dtype == np.float64:  # MuJoCo's (Reacher-v5)
