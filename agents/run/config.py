@@ -20,6 +20,7 @@ from agents.run.envs import TASK_ENVS, declared_symmetry, make_gym_env
 from agents.run.nested import flatten
 from agents.tdmpc.agent import TDMPCConfig
 from agents.tdmpc.augmentation import augmentation_group
+from geomdp_envs.declare import shipped_declarations
 from geomdp_envs.symmetry import Symmetry
 
 # Options that may change when a run is continued (budgets and display), and the rest must not.
@@ -154,8 +155,9 @@ def check_task(options: RunOptions) -> Task:
     if agent.group is not None:
         if task.symmetry is None:
             raise OptionError(f"agent.group={agent.group} needs a task that declares its symmetry "
-                              f"({', '.join(TASK_ENVS)}, or env.symmetry=<declaration>); "
-                              f"{options.env.id} does not: use agent.group=none")
+                              f"({', '.join(TASK_ENVS)}, or env.symmetry=<a YAML file or one of "
+                              f"{', '.join(shipped_declarations())}>); {options.env.id} does not: "
+                              "use agent.group=none")
         nets = agent.networks
         try:
             _, exact = group_for_task(agent.group, task.symmetry, nets.max_frequency,
