@@ -10,6 +10,8 @@ from omegaconf import OmegaConf
 from test_train import config, rows
 
 from agents.cli.train import run
+from agents.run.config import RunOptions
+from agents.run.envs import make_gym_env
 from geomdp_envs import check_symmetry, declare, groups, load_declaration, symmetry_of
 from geomdp_envs.check_cli import main as check_main
 from geomdp_envs.declare import Declaration, shipped_declarations
@@ -357,3 +359,15 @@ def test_checking_keeps_the_seed_record_time_and_controls():
     check_symmetry(env, n_trials=2)
     assert env.unwrapped.np_random_seed == 7
     assert data.time == time and np.array_equal(data.ctrl, ctrl)
+
+
+def test_an_inline_declaration_on_the_command_line():
+    inline = ("env.symmetry={dim:2,continuous_group:'O(2)',exact_group:C1,observation:["
+              "{name:x,rep:sign,index:0},{name:angle,rep:sign,index:1},{name:v,rep:sign,index:2},"
+              "{name:w,rep:sign,index:3}],action:[{name:force,rep:sign,index:0}]}")
+    resolved = OmegaConf.to_container(config("env=gym", "env.id=InvertedPendulum-v5", inline), resolve=True)
+    options = RunOptions.from_config(resolved)
+    assert options.env.symmetry["observation"][1] == {"name": "angle", "rep": "sign", "index": 1}
+    env = make_gym_env(options.env)
+    assert [f.name for f in symmetry_of(env).observation] == ["x", "angle", "v", "w"]
+    assert env.action_space.high[0] == 1  # the 3 N box rescaled for the agent, after declare
