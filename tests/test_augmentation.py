@@ -10,20 +10,24 @@ import torch
 from tensordict import TensorDict
 from test_train import config
 
-import geomdp_envs  # noqa: F401
 from agents.cli.train import run
 from agents.options import OptionError
 from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
 from agents.tdmpc.augmentation import SliceAugmentation, augmentation_group
+from geomdp_envs import declare, symmetry_of
+from geomdp_envs.declare import declared_env
 
 HORIZON = 4
+DECLARED = {"Reacher-v5": "reacher_v5"}  # a third-party env, with its shipped declaration
 
 
 def slices(env_id, n=3, seed=0, **kwargs):
     """``n`` slices of ``HORIZON`` steps from random in-domain actions, with the
     simulator state each starts from."""
     env = gymnasium.make(env_id, **kwargs)
-    sym, sim = env.unwrapped.symmetry, env.unwrapped
+    if env_id in DECLARED:
+        env = declare(env, DECLARED[env_id])
+    sym, sim = symmetry_of(env), declared_env(env) or env.unwrapped  # the simulator's state access
     rng = np.random.default_rng(seed)
     starts, steps = [], []
     for k in range(n):
@@ -44,22 +48,22 @@ def slices(env_id, n=3, seed=0, **kwargs):
                  "reward": torch.tensor(np.array([[[r[3]] for r in s] for s in steps])),
                  "terminated": torch.zeros(n, HORIZON, 1, dtype=torch.bool)}},
         batch_size=[n, HORIZON])
-    return env, sym, starts, batch
+    return sim, sym, starts, batch
 
 
 @pytest.mark.parametrize("env_id, kwargs, name", [
     ("GeoMDP/PointMass2D-v0", {}, "auto"),            # D4: box actions stay in the box
     ("GeoMDP/Reacher-v0", {"difficulty": "hard"}, "auto"),  # O(2), sign fields
     ("GeoMDP/PointMass3D-v0", {"n_balls": 2}, "octahedral"),
+    ("Reacher-v5", {}, "auto"),  # declared: non-contiguous fields, reordered
 ])
 def test_a_moved_slice_is_one_the_task_could_have_produced(env_id, kwargs, name):
-    env, sym, starts, batch = slices(env_id, **kwargs)
+    sim, sym, starts, batch = slices(env_id, **kwargs)
     augmentation = SliceAugmentation(name, sym, seed=3)
     elements, _, _ = SliceAugmentation(name, sym, seed=3).transform.sample_elements(len(starts))
     moved = augmentation(batch)
     assert not torch.allclose(moved["observation"], batch["observation"])
     assert torch.equal(moved["next", "reward"], batch["next", "reward"])
-    sim = env.unwrapped
     for k, g in enumerate(elements):
         sim.set_state(sim.transform_state(starts[k], g))
         np.testing.assert_allclose(sim.observe(), moved["observation"][k, 0], atol=1e-9)
