@@ -2,7 +2,8 @@
 
 The suite's smoke job: for each task, one episode with random actions from
 the declared action domain, the return, and ``check_symmetry`` on the task's
-exact group and on the continuous group it approximates.
+exact group and on the continuous group it approximates. The last two are
+Gymnasium's own MuJoCo envs with a shipped declaration (``geomdp_envs.declare``).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import gymnasium
 import numpy as np
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
-from geomdp_envs import check_symmetry
+from geomdp_envs import check_symmetry, declare, symmetry_of
 
 DEMO_TASKS = [
     ("GeoMDP/PointMass2D-v0", {}),
@@ -22,7 +23,10 @@ DEMO_TASKS = [
     ("GeoMDP/PointMass3D-v0", {"walls": True, "target_size": 0.02}),
     ("GeoMDP/Reacher-v0", {"difficulty": "easy", "frame": "local"}),
     ("GeoMDP/Reacher-v0", {"difficulty": "hard", "frame": "global"}),
+    ("Reacher-v5", {}),
+    ("InvertedPendulum-v5", {}),
 ]
+DECLARATIONS = {"Reacher-v5": "reacher_v5", "InvertedPendulum-v5": "inverted_pendulum_v5"}
 
 
 def random_episode(env: gymnasium.Env, seed: int) -> tuple[float, int]:
@@ -30,8 +34,10 @@ def random_episode(env: gymnasium.Env, seed: int) -> tuple[float, int]:
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
     total, steps, done = 0.0, 0, False
-    while not done:
-        action = env.unwrapped.symmetry.sample_action(rng).astype(np.float32)
+    low, high = env.action_space.low, env.action_space.high
+    while not done:  # the domain's unit ball, scaled to the action box
+        action = (low + high) / 2 + symmetry_of(env).sample_action(rng) * (high - low) / 2
+        action = action.astype(np.float32)
         _, reward, terminated, truncated, _ = env.step(action)
         total, steps, done = total + reward, steps + 1, terminated or truncated
     return total, steps
@@ -44,11 +50,14 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     for env_id, kwargs in DEMO_TASKS:
         env = gymnasium.make(env_id, **kwargs)
-        sym = env.unwrapped.symmetry
+        if env_id in DECLARATIONS:
+            env = declare(env, DECLARATIONS[env_id])
+        sym = symmetry_of(env)
         start = time.perf_counter()
         ret, steps = random_episode(env, args.seed)
         rate = steps / (time.perf_counter() - start)
-        print(f"\n{env_id} {kwargs}: obs {env.observation_space.shape}, "
+        declared = f" declared by {DECLARATIONS[env_id]}" if env_id in DECLARATIONS else ""
+        print(f"\n{env_id} {kwargs}{declared}: obs {env.observation_space.shape}, "
               f"action {env.action_space.shape}; random-policy return {ret:.1f} over "
               f"{steps} steps ({rate:.0f} steps/s)")
         for group in dict.fromkeys([sym.exact_group, sym.continuous_group]):
