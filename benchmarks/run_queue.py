@@ -20,7 +20,7 @@ a comment. The same plan given again skips finished runs and resumes the others:
     python benchmarks/run_queue.py benchmarks/plans/headline.txt --commit 9623621 \\
         --deadline 20:45 --estimate 'results/reacher_hard_cpu/*=45'
 
-``--dry-run`` prints what would start now, and touches nothing.
+``--dry-run`` prints what would start now, and touches nothing (not even the worktree).
 """
 from __future__ import annotations
 
@@ -215,13 +215,17 @@ def commit_results(repo: Path, dest: str, message: str) -> str:
     return "committed " + git(repo, "rev-parse", "--short", "HEAD").stdout.strip()
 
 
-def pinned_worktree(repo: Path, commit: str, path: Path | None) -> tuple[str, Path]:
-    """The full commit id and a clean worktree of it (made if missing)."""
+def pinned_worktree(repo: Path, commit: str, path: Path | None,
+                    create: bool = True) -> tuple[str, Path]:
+    """The full commit id and a clean worktree of it (made if missing, unless not
+    ``create``: then a missing worktree's path is returned as it is)."""
     done = git(repo, "rev-parse", "--verify", f"{commit}^{{commit}}")
     if done.returncode:
         raise PlanError(f"--commit {commit}: not a commit of {repo}")
     full = done.stdout.strip()
     path = path or repo.parent / f"queue-{full[:7]}"
+    if not path.exists() and not create:
+        return full, path
     if not path.exists():
         done = git(repo, "worktree", "add", "--detach", str(path), full)
         if done.returncode:
@@ -235,15 +239,12 @@ def pinned_worktree(repo: Path, commit: str, path: Path | None) -> tuple[str, Pa
     return full, path
 
 
-def trainer_module(worktree: Path) -> str:
+def trainer_module(repo: Path, commit: str) -> str:
     """The module of ``geomdp-train`` in the pinned commit (it moved between commits)."""
-    try:
-        text = (worktree / "pyproject.toml").read_text()
-    except OSError:
-        text = ""
+    text = git(repo, "show", f"{commit}:pyproject.toml").stdout
     match = re.search(r'^geomdp-train\s*=\s*"([\w.]+):\w+"', text, re.M)
     if match is None:
-        raise PlanError(f"{worktree}/pyproject.toml names no geomdp-train entry point")
+        raise PlanError(f"pyproject.toml of {commit[:10]} names no geomdp-train entry point")
     return match.group(1)
 
 
@@ -280,7 +281,7 @@ class Queue:
         self.runs, self.repo, self.commit, self.worktree = runs, repo, commit, worktree
         self.deadline, self.parallel = deadline, parallel
         self.estimates, self.default_minutes = list(estimates), default_minutes
-        self.module = module or trainer_module(worktree)
+        self.module = module or trainer_module(repo, commit)
         self.python, self.commit_results = python, commit_results
         self.poll_seconds, self.stop_grace_seconds = poll_seconds, stop_grace_seconds
         for run in runs:
@@ -460,7 +461,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         text = sys.stdin.read() if args.plan == "-" else Path(args.plan).read_text()
         runs = read_plan(text)
-        commit, worktree = pinned_worktree(REPO, args.commit, args.worktree)
+        commit, worktree = pinned_worktree(REPO, args.commit, args.worktree, create=not args.dry_run)
         queue = Queue(runs, REPO, commit, worktree, parse_deadline(args.deadline, dt.datetime.now()),
                       args.parallel, parse_estimates(args.estimate), args.default_minutes,
                       args.python, args.module, not args.no_commit, args.poll_seconds)

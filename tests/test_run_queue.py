@@ -241,3 +241,15 @@ def test_every_plan_line_is_a_valid_run():
         for steps, *overrides in sorted(runs):
             cfg = compose("train", overrides=[*overrides, f"train.steps={steps}"])
             check_task(RunOptions.from_config(OmegaConf.to_container(cfg, resolve=True)))
+
+
+def test_dry_run_prints_the_plan_and_makes_no_worktree(repo: Path, monkeypatch, capsys) -> None:
+    monkeypatch.setattr(rq, "REPO", repo)
+    plan = repo / "plan.txt"
+    plan.write_text("results/x/a/seed1 100 seed=1\n")
+    worktree = repo.parent / "not-made"
+    assert rq.main([str(plan), "--commit", "HEAD", "--deadline", "+1h", "--worktree", str(worktree),
+                    "--module", "fake_train", "--estimate", "results/x/*=5", "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "5 min fits  results/x/a/seed1" in out and "fake_train seed=1 train.steps=100" in out
+    assert not worktree.exists() and "not-made" not in git(repo, "worktree", "list")
