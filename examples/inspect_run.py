@@ -19,10 +19,11 @@ from omegaconf import OmegaConf
 
 from agents.run import checkpoint
 from agents.run.config import RunOptions
-from agents.run.envs import declared_symmetry, make_gym_env
+from agents.run.envs import make_gym_env
 from agents.run.video import frames_per_second, write_video
 from agents.tdmpc.agent import TDMPCAgent
 from agents.tdmpc.replay import make_replay_buffer
+from geomdp_envs import symmetry_of
 
 
 def main() -> None:
@@ -37,7 +38,7 @@ def main() -> None:
     agent_cfg = options.agent
     env = make_gym_env(options.env,
                        render_mode="rgb_array" if args.video else None)
-    agent = TDMPCAgent(agent_cfg, declared_symmetry(env), env.observation_space.shape[0],
+    agent = TDMPCAgent(agent_cfg, symmetry_of(env), env.observation_space.shape[0],
                        env.action_space.shape[0])
     state = checkpoint.load(args.run_dir, agent, make_replay_buffer(
         agent_cfg.replay, agent_cfg.horizon, agent_cfg.batch_size))

@@ -21,7 +21,7 @@ import gymnasium
 import numpy as np
 
 from geomdp_envs import groups
-from geomdp_envs.declare import DeclaredEnv, declared_env
+from geomdp_envs.declare import DeclaredSimulator, declared_env
 from geomdp_envs.mujoco_env import GeometricMujocoEnv
 from geomdp_envs.symmetry import Symmetry
 
@@ -98,7 +98,7 @@ def check_symmetry(
     """
     if n_trials < 1 or n_steps < 1:
         raise ValueError(f"n_trials and n_steps must be at least 1, got {n_trials} and {n_steps}")
-    base = _simulator(env)
+    base = simulator_of(env)
     symmetry = symmetry or base.symmetry
     rng = np.random.default_rng(seed)
     if elements is None:
@@ -133,20 +133,19 @@ def check_symmetry(
                           worst_permutation=perms[worst], field_errors=field_errors)
 
 
-def _simulator(env: gymnasium.Env) -> GeometricMujocoEnv | DeclaredEnv:
-    """What check_symmetry moves: the built-in task, or the ``declare`` wrapper (whose
-    state access raises a clear error when the env's state cannot be set)."""
+def simulator_of(env: gymnasium.Env) -> GeometricMujocoEnv | DeclaredSimulator:
+    """What check_symmetry moves: the built-in task, or a declared env's simulator (which
+    raises a clear error when the env's state cannot be set), looking through wrappers."""
     if isinstance(env.unwrapped, GeometricMujocoEnv):
         return env.unwrapped
     wrapper = declared_env(env)
     if wrapper is None:
         raise TypeError(f"{type(env.unwrapped).__name__} declares no symmetry: wrap it with "
                         "geomdp_envs.declare(env, ...) (see README, 'Bring your own task')")
-    wrapper.get_state()  # raises if the declaration has no state or the env cannot be set
-    return wrapper
+    return wrapper.simulator()
 
 
-def _one_trial(env: GeometricMujocoEnv | DeclaredEnv, symmetry: Symmetry, g: np.ndarray,
+def _one_trial(env: GeometricMujocoEnv | DeclaredSimulator, symmetry: Symmetry, g: np.ndarray,
                perm: np.ndarray | None, rng: np.random.Generator,
                n_steps: int) -> tuple[np.ndarray, float]:
     """Errors for one triple: |observation error| [n_steps + 1, observation_size] and the

@@ -17,7 +17,7 @@ from YAML (``load_declaration("reacher_v5")`` reads a shipped one, or give a pat
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -29,7 +29,15 @@ from gymnasium import spaces
 
 from geomdp_envs import groups
 from geomdp_envs.mujoco_env import SimState
-from geomdp_envs.symmetry import REPRESENTATIONS, Field, Symmetry, check_groups, rep_matrix, rep_size
+from geomdp_envs.symmetry import (
+    REPRESENTATIONS,
+    Symmetry,
+    check_groups,
+    layout,
+    rep_matrix,
+    rep_size,
+    to_action_box,
+)
 
 # A planar orientation angle phi (an absolute hinge about the plane's normal): g moves
 # it to the angle of g (cos phi, sin phi). Only the state has these; observations show
@@ -185,15 +193,9 @@ class Declaration:
         self.order("observation", observation_size)
         self.order("action", action_size)
 
-        def contiguous(fields: tuple[IndexedField, ...]) -> tuple[Field, ...]:
-            out, start = [], 0
-            for f in fields:
-                out.append(Field(f.name, f.rep, start, start + len(f.index)))
-                start += len(f.index)
-            return tuple(out)
-
         return Symmetry(self.dim, self.continuous_group, self.exact_group,
-                        contiguous(self.observation), contiguous(self.action), notes=self.notes)
+                        layout(self.dim, [(f.name, f.rep) for f in self.observation]),
+                        layout(self.dim, [(f.name, f.rep) for f in self.action]), notes=self.notes)
 
     def transform_state(self, vectors: dict[str, np.ndarray], g: np.ndarray) -> dict[str, np.ndarray]:
         """g applied to ``{"qpos": ..., "qvel": ...}`` field by field."""
@@ -264,35 +266,13 @@ def _box(space: spaces.Space, order: np.ndarray, kind: str) -> spaces.Box:
     return spaces.Box(space.low[order], space.high[order], dtype=space.dtype)
 
 
-@dataclass
-class _MujocoAccess:
-    """Reads and writes the state of a Gymnasium ``MujocoEnv`` (``env.unwrapped``)."""
-
-    env: Any
-    name: str
-    nq: int = field(init=False)
-    nv: int = field(init=False)
-
-    def __post_init__(self) -> None:
-        missing = [a for a in ("model", "data", "set_state", "_get_obs", "do_simulation")
-                   if not hasattr(self.env, a)]
-        if missing:
-            raise TypeError(f"{self.name} is not a Gymnasium MujocoEnv (it lacks {', '.join(missing)}): "
-                            "check_symmetry needs to set a state g.s in the simulator, which this env "
-                            "does not allow")
-        self.nq, self.nv = int(self.env.model.nq), int(self.env.model.nv)
-        if self.env.model.na:
-            raise ValueError(f"{self.name} has {self.env.model.na} actuator activation state(s), "
-                             "which a declaration does not cover: check_symmetry cannot move them")
-
-
 class DeclaredEnv(gymnasium.Wrapper):
     """A third-party env with a symmetry declaration, its vectors in declaration order.
 
     The agent sends actions in declaration order and receives observations in it;
     ``symmetry`` describes those reordered vectors. For a MuJoCo env whose state
-    the declaration covers, it also offers the state access ``check_symmetry`` uses
-    (get/set/sample/transform state, observe, simulate), as the built-in tasks do.
+    the declaration covers, ``simulator()`` gives the state access ``check_symmetry``
+    uses (get/set/sample/transform state, observe, simulate), as the built-in tasks do.
     """
 
     def __init__(self, env: gymnasium.Env, declaration: Declaration) -> None:
@@ -349,8 +329,9 @@ class DeclaredEnv(gymnasium.Wrapper):
         return self.to_declared_observation(obs), reward, terminated, truncated, info
 
     # --- state access for check_symmetry ----------------------------------------------
-    @property
-    def _mujoco(self) -> _MujocoAccess:
+    def simulator(self) -> DeclaredSimulator:
+        """The env's simulator seen through the declaration, which ``check_symmetry`` moves
+        by g; raises a one-line error when the declaration or the env does not allow it."""
         if self.declaration.state is None:
             raise ValueError(f"{self.env_name}: the declaration has no state, so check_symmetry cannot "
                              "move the simulator by g: declare how qpos and qvel transform "
@@ -362,68 +343,82 @@ class DeclaredEnv(gymnasium.Wrapper):
                                  "the env, and check_symmetry steps the bare env, so it would check "
                                  "something else than what the agent sees: apply it outside declare()")
             inner = inner.env
-        access = _MujocoAccess(self.env.unwrapped, self.env_name)
-        for name, size in (("qpos", access.nq), ("qvel", access.nv)):
+        return DeclaredSimulator(self, self.env.unwrapped)
+
+
+class DeclaredSimulator:
+    """State access to a declared Gymnasium ``MujocoEnv``, in declaration order: get, set,
+    sample and transform states, observe, simulate (what a built-in task offers
+    ``check_symmetry``). Made by ``DeclaredEnv.simulator()``, which checks once that the
+    env is a MuJoCo env whose qpos and qvel the declaration covers."""
+
+    def __init__(self, wrapper: DeclaredEnv, mujoco_env: Any) -> None:
+        name = wrapper.env_name
+        missing = [a for a in ("model", "data", "set_state", "_get_obs", "do_simulation")
+                   if not hasattr(mujoco_env, a)]
+        if missing:
+            raise TypeError(f"{name} is not a Gymnasium MujocoEnv (it lacks {', '.join(missing)}): "
+                            "check_symmetry needs to set a state g.s in the simulator, which this env "
+                            "does not allow")
+        if mujoco_env.model.na:
+            raise ValueError(f"{name} has {mujoco_env.model.na} actuator activation state(s), "
+                             "which a declaration does not cover: check_symmetry cannot move them")
+        for vector, size in (("qpos", mujoco_env.model.nq), ("qvel", mujoco_env.model.nv)):
             try:
-                _coverage(f"state.{name}", self.declaration.state.get(name, ()), size)
+                _coverage(f"state.{vector}", wrapper.declaration.state.get(vector, ()), int(size))
             except ValueError as err:
-                raise ValueError(f"{self.env_name}: {err}") from None
-        return access
+                raise ValueError(f"{name}: {err}") from None
+        self.wrapper, self.env, self.symmetry = wrapper, mujoco_env, wrapper.symmetry
 
     def get_state(self) -> SimState:
         """qpos and qvel, plus the simulation time and controls (kept unmoved by g, and
         put back when check_symmetry restores the env)."""
-        data = self._mujoco.env.data
+        data = self.env.data
         return SimState(data.qpos.copy(), data.qvel.copy(),
                         {"time": np.array([data.time]), "ctrl": data.ctrl.copy()})
 
     def set_state(self, state: SimState) -> None:
         """Sets qpos, qvel (and time, controls when given), and clears the solver's warm
         start so that two runs from the same state are the same run."""
-        env = self._mujoco.env
-        env.data.qacc_warmstart[:] = 0
+        self.env.data.qacc_warmstart[:] = 0
         if "time" in state.task:
-            env.data.time = float(state.task["time"][0])
+            self.env.data.time = float(state.task["time"][0])
         if "ctrl" in state.task:
-            env.data.ctrl[:] = state.task["ctrl"]
-        env.set_state(np.asarray(state.qpos, dtype=np.float64), np.asarray(state.qvel, dtype=np.float64))
+            self.env.data.ctrl[:] = state.task["ctrl"]
+        self.env.set_state(np.asarray(state.qpos, dtype=np.float64),
+                           np.asarray(state.qvel, dtype=np.float64))
 
     def transform_state(self, state: SimState, g: np.ndarray,
                         permutation: np.ndarray | None = None) -> SimState:
         if permutation is not None:
-            raise ValueError(f"{self.env_name}: a declared env has no interchangeable particles")
-        moved = self.declaration.transform_state({"qpos": state.qpos, "qvel": state.qvel}, g)
+            raise ValueError(f"{self.wrapper.env_name}: a declared env has no interchangeable particles")
+        moved = self.wrapper.declaration.transform_state({"qpos": state.qpos, "qvel": state.qvel}, g)
         return SimState(moved["qpos"], moved["qvel"], dict(state.task))
 
     def sample_state(self, rng: np.random.Generator) -> SimState:
         """A state the env itself reaches: a reset, then a few random actions. The env's
         own random generator is put back, so checking does not change its episodes."""
-        env = self._mujoco.env
-        saved_generator, saved_seed = env.np_random, env.np_random_seed
+        saved_generator, saved_seed = self.env.np_random, self.env.np_random_seed
         try:
-            env.reset(seed=int(rng.integers(2**31)))
+            self.env.reset(seed=int(rng.integers(2**31)))
             for action in self.symmetry.sample_action(rng, WARM_UP_STEPS):
-                env.step(self.to_env_action(self._scaled(action)))
+                self.env.step(self._env_action(action))
         finally:
-            env.np_random = saved_generator
-            env._np_random_seed = saved_seed  # the setter above records -1 (unknown seed)
+            self.env.np_random = saved_generator
+            self.env._np_random_seed = saved_seed  # the setter above records -1 (unknown seed)
         return self.get_state()
 
     def observe(self) -> np.ndarray:
-        return self.to_declared_observation(np.asarray(self._mujoco.env._get_obs(), dtype=np.float64))
+        return self.wrapper.to_declared_observation(np.asarray(self.env._get_obs(), dtype=np.float64))
 
     def simulate(self, action: np.ndarray) -> tuple[np.ndarray, float]:
         """One step of the bare env (no time limit), an action in ``ACTION_DOMAIN`` scaled
         to the action box: (observation in declaration order, reward)."""
-        env = self._mujoco.env
-        obs, reward, *_ = env.step(self.to_env_action(self._scaled(action)))
-        return self.to_declared_observation(np.asarray(obs, dtype=np.float64)), float(reward)
+        obs, reward, *_ = self.env.step(self._env_action(action))
+        return self.wrapper.to_declared_observation(np.asarray(obs, dtype=np.float64)), float(reward)
 
-    def _scaled(self, action: np.ndarray) -> np.ndarray:
-        """An action of the unit domain [-1, 1] mapped affinely onto the env's action box
-        (for signed fields, whose box is symmetric, that is a scaling)."""
-        low, high = self.action_space.low.astype(np.float64), self.action_space.high.astype(np.float64)
-        return (low + high) / 2 + np.asarray(action) * (high - low) / 2
+    def _env_action(self, action: np.ndarray) -> np.ndarray:
+        return self.wrapper.to_env_action(to_action_box(action, self.wrapper.action_space))
 
 
 def declare(env: gymnasium.Env, declaration: str | Path | Mapping[str, Any] | Declaration | None = None,

@@ -16,6 +16,7 @@ import numpy as np
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
 from geomdp_envs import check_symmetry, declare, symmetry_of
+from geomdp_envs.symmetry import to_action_box
 
 DEMO_TASKS = [
     ("GeoMDP/PointMass2D-v0", {}),
@@ -34,10 +35,8 @@ def random_episode(env: gymnasium.Env, seed: int) -> tuple[float, int]:
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
     total, steps, done = 0.0, 0, False
-    low, high = env.action_space.low, env.action_space.high
     while not done:  # the domain's unit ball, scaled to the action box
-        action = (low + high) / 2 + symmetry_of(env).sample_action(rng) * (high - low) / 2
-        action = action.astype(np.float32)
+        action = to_action_box(symmetry_of(env).sample_action(rng), env.action_space).astype(np.float32)
         _, reward, terminated, truncated, _ = env.step(action)
         total, steps, done = total + reward, steps + 1, terminated or truncated
     return total, steps

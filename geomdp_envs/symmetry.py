@@ -37,6 +37,14 @@ ACTION_DOMAIN = (
 )
 
 
+def to_action_box(action: np.ndarray, space: Any) -> np.ndarray:
+    """An action of the unit domain [-1, 1] mapped affinely onto a Box action space's
+    bounds (for signed fields, whose bounds are symmetric about 0, that is a scaling
+    and commutes with the group)."""
+    low, high = np.asarray(space.low, dtype=np.float64), np.asarray(space.high, dtype=np.float64)
+    return (low + high) / 2 + np.asarray(action) * (high - low) / 2
+
+
 def rep_size(rep: str, dim: int) -> int:
     """Number of coordinates a field of representation ``rep`` occupies."""
     if rep not in REPRESENTATIONS:

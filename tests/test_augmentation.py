@@ -15,7 +15,7 @@ from agents.options import OptionError
 from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
 from agents.tdmpc.augmentation import SliceAugmentation, augmentation_group
 from geomdp_envs import declare, symmetry_of
-from geomdp_envs.declare import declared_env
+from geomdp_envs.check import simulator_of
 
 HORIZON = 4
 DECLARED = {"Reacher-v5": "reacher_v5"}  # a third-party env, with its shipped declaration
@@ -27,7 +27,7 @@ def slices(env_id, n=3, seed=0, **kwargs):
     env = gymnasium.make(env_id, **kwargs)
     if env_id in DECLARED:
         env = declare(env, DECLARED[env_id])
-    sym, sim = symmetry_of(env), declared_env(env) or env.unwrapped  # the simulator's state access
+    sym, sim = symmetry_of(env), simulator_of(env)  # the simulator's state access
     rng = np.random.default_rng(seed)
     starts, steps = [], []
     for k in range(n):

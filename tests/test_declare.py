@@ -130,9 +130,9 @@ def test_inverted_pendulum_mirror_is_exact_only_for_an_upright_pole(upright_pend
 def test_checking_restores_the_env_and_its_random_generator():
     env = reacher()
     env.reset(seed=1)
-    before = env.get_state()
+    before = env.simulator().get_state()
     check_symmetry(env, n_trials=4)
-    after = env.get_state()
+    after = env.simulator().get_state()
     np.testing.assert_array_equal(before.qpos, after.qpos)
     np.testing.assert_array_equal(before.qvel, after.qvel)
     twin = reacher()

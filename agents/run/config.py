@@ -16,10 +16,11 @@ import torch
 
 from agents.nn.escnn_groups import group_for_task
 from agents.options import OptionError, check, from_dict, option
-from agents.run.envs import TASK_ENVS, declared_symmetry, make_gym_env
+from agents.run.envs import TASK_ENVS, make_gym_env
 from agents.run.nested import flatten
 from agents.tdmpc.agent import TDMPCConfig
 from agents.tdmpc.augmentation import augmentation_group
+from geomdp_envs import symmetry_of
 from geomdp_envs.declare import shipped_declarations
 from geomdp_envs.symmetry import Symmetry
 
@@ -147,7 +148,7 @@ def check_task(options: RunOptions) -> Task:
         raise OptionError("logger.tensorboard=true but the tensorboard package is not installed "
                           "(pip install tensorboard); use logger.tensorboard=auto or false")
     env = make_gym_env(options.env)
-    task = Task(declared_symmetry(env), env.observation_space.shape[0], env.action_space.shape[0])
+    task = Task(symmetry_of(env), env.observation_space.shape[0], env.action_space.shape[0])
     env.close()
     agent = options.agent
     if agent.augment != "none":

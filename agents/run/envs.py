@@ -12,8 +12,7 @@ from torchrl.envs.transforms import FrameSkipTransform
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
 from agents.options import OptionError
-from geomdp_envs.declare import declare, symmetry_of
-from geomdp_envs.symmetry import Symmetry
+from geomdp_envs.declare import declare
 
 if TYPE_CHECKING:
     from agents.run.config import EnvOptions
@@ -52,11 +51,6 @@ def make_gym_env(env: EnvOptions, render_mode: str | None = None) -> gymnasium.E
     if not (np.all(low == -1) and np.all(high == 1)):
         gym_env = gymnasium.wrappers.RescaleAction(gym_env, np.float32(-1), np.float32(1))  # no cast warning
     return gym_env
-
-
-def declared_symmetry(env: gymnasium.Env) -> Symmetry | None:
-    """The task's symmetry declaration (its own, or attached by ``env.symmetry``), if any."""
-    return symmetry_of(env)
 
 
 def torchrl_env(gym_env: gymnasium.Env, action_repeat: int) -> TransformedEnv:
