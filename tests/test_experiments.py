@@ -4,12 +4,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 from test_train import TINY, TRAIN
 
 from agents.cli import plot
 from agents.cli.train import CONFIG_DIR
+from agents.run.td_invariants import td_invariants
 
 EXPERIMENTS = sorted(p.stem for p in (CONFIG_DIR / "experiment").glob("*.yaml"))
 
@@ -101,3 +103,60 @@ def test_plot_without_runs_is_a_clear_error(tmp_path):
     out = subprocess.run([sys.executable, "-m", "agents.cli.plot", str(tmp_path)],
                          capture_output=True, text=True)
     assert out.returncode != 0 and "no run directories" in out.stderr
+
+
+def write_train_log(path: Path, q: list[float], lag: list[float], reward: list[float]):
+    """A train.csv with one row per episode of 1000 env steps (the first without updates)."""
+    path.mkdir(parents=True, exist_ok=True)
+    lines = ["env_step,wall_time,q_mean,target_lag,episode_reward",
+             f"1000,1.0,,,{reward[0]}"]
+    lines += [f"{1000 * (i + 2)},{60.0 * (i + 2)},{qi},{li},{ri}"
+              for i, (qi, li, ri) in enumerate(zip(q, lag, reward[1:]))]
+    (path / "train.csv").write_text("\n".join(lines) + "\n")
+
+
+def test_td_invariants_name_each_way_value_learning_breaks(tmp_path):
+    n = 20
+    healthy = dict(q=list(np.linspace(0.1, 200, n)), lag=[0.3] + [0.02] * (n - 1),
+                   reward=[0.0] * 5 + [500.0] * (n - 4))
+    broken = {
+        "frozen": {**healthy, "lag": list(np.linspace(0.02, 0.9, n))},  # the target never moves
+        "copy": {**healthy, "lag": [0.0] * n},  # the target is the online network
+        "sign": {**healthy, "q": list(np.linspace(0, -50, n))},  # rewards positive, Q negative
+        "drift": {**healthy, "reward": [0.0] * (n + 1)},  # no reward, Q grows anyway
+        "nan": {**healthy, "q": [*healthy["q"][:-1], float("nan")]},
+    }
+    expected = {"frozen": "does not track", "copy": "target_lag is 0", "sign": "not of the sign",
+                "drift": "with no reward seen", "nan": "not finite"}
+    write_train_log(tmp_path / "healthy", **healthy)
+    td = td_invariants(tmp_path / "healthy/train.csv")
+    assert td.failures == () and td.target_lag_high == 0.02  # the early spike is left out
+    assert td.q_end == 200 and td.q_half == healthy["q"][8]  # at 10k of 21k env steps
+    for name, log in broken.items():
+        write_train_log(tmp_path / name, **log)
+        failures = td_invariants(tmp_path / name / "train.csv").failures
+        assert len(failures) == 1 and expected[name] in failures[0], (name, failures)
+    # a cost task (negative rewards) learns negative values; no reward and Q ~ 0 is healthy
+    write_train_log(tmp_path / "cost", q=list(np.linspace(0, -12, n)), lag=[0.02] * n,
+                    reward=[-40.0] * (n + 1))
+    write_train_log(tmp_path / "unlucky", q=[0.02] * n, lag=[0.02] * n, reward=[0.0] * (n + 1))
+    assert td_invariants(tmp_path / "cost/train.csv").failures == ()
+    assert td_invariants(tmp_path / "unlucky/train.csv").failures == ()
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "empty/train.csv").write_text("env_step,q_mean\n1000,\n")
+    with pytest.raises(ValueError, match="empty/train.csv: no row with an update"):
+        td_invariants(tmp_path / "empty/train.csv")
+
+
+def test_plot_lists_runs_with_their_td_invariants(tmp_path, capsys):
+    write_run(tmp_path / "D8/1", "D8", 1, [0, 900, 950])
+    write_train_log(tmp_path / "D8/1", q=[1.0, 50.0, 100.0], lag=[0.02] * 3, reward=[0, 10, 20, 30])
+    write_run(tmp_path / "none/1", "none", 1, [0, 5.5, 7])
+    write_train_log(tmp_path / "none/1", q=[1.0, 2.0, 3.0], lag=[0.5] * 3, reward=[0, 10, 20, 30])
+    write_run(tmp_path / "none/2", "none", 2, [0, 0, 0])  # no train.csv (e.g. copied evals only)
+    plot.main([str(tmp_path), "--runs"])
+    rows = {line.split("|")[1].strip() + line.split("|")[2].strip(): line
+            for line in capsys.readouterr().out.splitlines() if line.count("|") == 8}
+    assert "| 0 900 950 | 4 | 1 → 100 | 0.020–0.020 | hold |" in rows["group=D81"]
+    assert "| 0 5.5 7.0 | 4 |" in rows["group=none1"] and "does not track" in rows["group=none1"]
+    assert rows["group=none2"].endswith("| – | – | – | no train.csv |")

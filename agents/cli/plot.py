@@ -12,7 +12,9 @@ that have reached it are used. Prints a markdown table of final returns (mean
 with 95% CI, IQM), of each seed's mean return over its evaluations (the area
 under its curve: sample efficiency; compare runs of equal length) and of the
 environment steps each seed took to reach ``--threshold``; with ``--paired GROUP``,
-every group against that one seed by seed (differences, bootstrap CI, paired t-test).
+every group against that one seed by seed (differences, bootstrap CI, paired t-test);
+with ``--runs``, one row per run: its evaluations, wall time and the invariants of a
+working TD learner (``agents.run.td_invariants``), failures named.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from omegaconf import OmegaConf
 from scipy import stats
 
 from agents.run.nested import flatten, with_added_later
+from agents.run.td_invariants import td_invariants
 
 IGNORED_KEYS = ("seed", "train.progress", "train.threads", "logger", "device",
                 "train.eval_every", "train.eval_episodes", "train.eval_noisy_episodes",
@@ -166,6 +169,36 @@ def paired_table(groups: dict[str, list[Run]], baseline: str) -> str:
     return "\n".join(rows)
 
 
+def wall_minutes(run: Run) -> float | None:
+    """The run's wall time over all its sessions (evaluations included), in minutes."""
+    times = []
+    for name in ("train.csv", "eval.csv"):
+        if (run.path / name).exists():
+            with (run.path / name).open(newline="") as f:
+                times += [float(r["wall_time"]) for r in csv.DictReader(f) if r.get("wall_time")]
+    return max(times) / 60 if times else None
+
+
+def runs_table(groups: dict[str, list[Run]]) -> str:
+    """One row per run: evaluation returns, wall time, Q half-way and at the end, the
+    target network's lag late in training, and which TD invariants fail."""
+    rows = ["| group | seed | evaluation returns | wall time (min) | Q half-way → end "
+            "| target_lag, last episodes | TD invariants |", "|---|---|---|---|---|---|---|"]
+    for label, runs in groups.items():
+        for run in sorted(runs, key=lambda r: str(r.options.get("seed"))):
+            returns = " ".join(f"{r:.0f}" if abs(r) >= 10 or r == 0 else f"{r:.1f}" for r in run.returns)
+            minutes = wall_minutes(run)
+            wall = "–" if minutes is None else f"{minutes:.0f}"
+            if (run.path / "train.csv").exists():
+                td = td_invariants(run.path / "train.csv")
+                cells = (f"{td.q_half:.3g} → {td.q_end:.3g} | {td.target_lag_low:.3f}–"
+                         f"{td.target_lag_high:.3f} | {'; '.join(td.failures) or 'hold'}")
+            else:
+                cells = "– | – | no train.csv"
+            rows.append(f"| {label} | {run.options.get('seed')} | {returns} | {wall} | {cells} |")
+    return "\n".join(rows)
+
+
 def plot(groups: dict[str, list[Run]], out: Path, title: str,
          references: list[tuple[float, str]]) -> None:
     import matplotlib
@@ -216,6 +249,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--paired", metavar="GROUP", default=None,
                         help="also compare every group with this one seed by seed "
                              "(a label of the table, e.g. 'group=none')")
+    parser.add_argument("--runs", action="store_true",
+                        help="also list every run: evaluations, wall time, TD learner invariants")
     args = parser.parse_args(argv)
     runs = [r for r in find_runs(args.paths) if args.complete is None or r.steps[-1] >= args.complete]
     if not runs:
@@ -231,6 +266,8 @@ def main(argv: list[str] | None = None) -> None:
     text = table(groups, args.threshold)
     if args.paired is not None:
         text += "\n\n" + paired_table(groups, args.paired)
+    if args.runs:
+        text += "\n\n" + runs_table(groups)
     print(text)
     if args.markdown:
         args.markdown.write_text(text + "\n")

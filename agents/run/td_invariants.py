@@ -1,0 +1,83 @@
+"""The invariants a working TD learner shows, read from a run's ``train.csv``.
+
+A learning curve alone cannot tell "the agent has not found the reward yet" from
+"the value learning is broken" (a frozen target network, a sign error, a Q that
+drifts without reward). These checks can, and each is cheap enough to run on
+every finished run (``geomdp-plot --runs``):
+
+- the target network tracks the online one: in the second half of the run,
+  ``target_lag`` (|online - target| / |online| over all parameters) stays above 0
+  (a target equal to the online network is no target) and below
+  ``MAX_TARGET_LAG`` (a frozen or lost target drifts away). The first updates are
+  left out: there the online network leaves its initialisation faster than any
+  soft update follows, and the lag spikes in healthy runs too;
+- Q has the sign of the rewards seen late in training (a positive-reward task
+  must not learn negative values, nor a cost task positive ones);
+- with (almost) no reward in the whole run, Q stays near 0 (the fixed point of
+  the TD backup on zero rewards) rather than drifting.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+# Healthy runs in results/ (50 of them): at most 0.18 in their second half. PointMass2D plain,
+# 10k steps, with the target update disabled (SoftUpdate.step a no-op): 0.05-0.07 until the
+# first rewards, then 0.27-0.33 from 7k steps on, growing.
+MAX_TARGET_LAG = 0.25
+REWARD_SEEN = 1.0  # |mean episode reward| from which rewards count as seen (per episode)
+MAX_Q_WITHOUT_REWARD = 1.0  # |Q| after a run with no reward; healthy runs show ~0.02
+LAST_EPISODES = 50  # late training: the last episodes of the second half
+
+
+@dataclass(frozen=True)
+class TDInvariants:
+    """Late-training value statistics of one run, and the checks they fail (none: healthy)."""
+
+    q_half: float  # q_mean at the logged row nearest half of the run's env steps
+    q_end: float  # q_mean at the last logged row
+    target_lag_low: float  # over late training (the last LAST_EPISODES of the second half)
+    target_lag_high: float
+    late_reward: float  # mean training episode reward over late training
+    run_reward: float  # total training episode reward of the run
+    failures: tuple[str, ...]
+
+
+def _floats(rows: list[dict[str, str]], column: str) -> list[float]:
+    return [float(r[column]) for r in rows if r.get(column) not in (None, "")]
+
+
+def td_invariants(train_csv: Path) -> TDInvariants:
+    """The invariants of the run whose training log is ``train_csv``; a ValueError names
+    the file when it has no logged update to judge."""
+    with Path(train_csv).open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    updated = [r for r in rows if r.get("q_mean") not in (None, "")]
+    if not updated:
+        raise ValueError(f"{train_csv}: no row with an update (q_mean), so no TD invariant to check")
+    half = float(updated[-1]["env_step"]) / 2
+    q_half = float(min(updated, key=lambda r: abs(float(r["env_step"]) - half))["q_mean"])
+    q_end = float(updated[-1]["q_mean"])
+    late = [r for r in updated if float(r["env_step"]) > half][-LAST_EPISODES:] or updated[-1:]
+    lags = _floats(late, "target_lag")
+    late_rewards = _floats(late, "episode_reward")
+    late_reward = sum(late_rewards) / max(len(late_rewards), 1)
+    run_reward = sum(_floats(rows, "episode_reward"))
+    failures = []
+    if not (math.isfinite(q_half) and math.isfinite(q_end)):
+        failures.append("Q is not finite")
+    if not lags or min(lags) <= 0:
+        failures.append("target_lag is 0: the target network is the online network")
+    elif max(lags) > MAX_TARGET_LAG:
+        failures.append(f"target_lag reaches {max(lags):.3f} > {MAX_TARGET_LAG} in the second half: "
+                        "the target network does not track the online one")
+    if abs(late_reward) >= REWARD_SEEN and q_end * late_reward <= 0:
+        failures.append(f"Q ends at {q_end:.3g}, not of the sign of the rewards seen "
+                        f"({late_reward:.3g} per episode)")
+    if abs(run_reward) < REWARD_SEEN and abs(q_end) > MAX_Q_WITHOUT_REWARD:
+        failures.append(f"Q ends at {q_end:.3g} with no reward seen (the TD fixed point is 0)")
+    return TDInvariants(q_half, q_end, min(lags, default=math.nan), max(lags, default=math.nan),
+                        late_reward, run_reward, tuple(failures))
