@@ -125,9 +125,12 @@ def test_td_invariants_name_each_way_value_learning_breaks(tmp_path):
         "sign": {**healthy, "q": list(np.linspace(0, -50, n))},  # rewards positive, Q negative
         "drift": {**healthy, "reward": [0.0] * (n + 1)},  # no reward, Q grows anyway
         "nan": {**healthy, "q": [*healthy["q"][:-1], float("nan")]},
+        "nan_lag": {**healthy, "lag": [*healthy["lag"][:-1], float("nan")]},
+        "nan_reward": {**healthy, "reward": [*healthy["reward"][:-1], float("nan")]},
     }
     expected = {"frozen": "does not track", "copy": "target_lag is 0", "sign": "not of the sign",
-                "drift": "with no reward seen", "nan": "not finite"}
+                "drift": "with no reward seen", "nan": "Q is not finite",
+                "nan_lag": "target_lag is not finite", "nan_reward": "reward is not finite"}
     write_train_log(tmp_path / "healthy", **healthy)
     td = td_invariants(tmp_path / "healthy/train.csv")
     assert td.failures == () and td.target_lag_high == 0.02  # the early spike is left out
@@ -140,8 +143,14 @@ def test_td_invariants_name_each_way_value_learning_breaks(tmp_path):
     write_train_log(tmp_path / "cost", q=list(np.linspace(0, -12, n)), lag=[0.02] * n,
                     reward=[-40.0] * (n + 1))
     write_train_log(tmp_path / "unlucky", q=[0.02] * n, lag=[0.02] * n, reward=[0.0] * (n + 1))
-    assert td_invariants(tmp_path / "cost/train.csv").failures == ()
-    assert td_invariants(tmp_path / "unlucky/train.csv").failures == ()
+    # rewards of both signs that cancel out were still seen
+    write_train_log(tmp_path / "mixed", q=[0.02] * (n - 1) + [3.0], lag=[0.02] * n,
+                    reward=[50.0, -50.0] * (n // 2) + [0.0])
+    # too short a run to judge the lag: its only update is the start-of-training spike
+    write_train_log(tmp_path / "short", q=[0.0], lag=[0.4], reward=[0.0, 0.0])
+    for name in ("cost", "unlucky", "mixed", "short"):
+        assert td_invariants(tmp_path / name / "train.csv").failures == (), name
+    assert "target_lag not judged" in td_invariants(tmp_path / "short/train.csv").notes[0]
     (tmp_path / "empty").mkdir()
     (tmp_path / "empty/train.csv").write_text("env_step,q_mean\n1000,\n")
     with pytest.raises(ValueError, match="empty/train.csv: no row with an update"):
@@ -150,13 +159,22 @@ def test_td_invariants_name_each_way_value_learning_breaks(tmp_path):
 
 def test_plot_lists_runs_with_their_td_invariants(tmp_path, capsys):
     write_run(tmp_path / "D8/1", "D8", 1, [0, 900, 950])
-    write_train_log(tmp_path / "D8/1", q=[1.0, 50.0, 100.0], lag=[0.02] * 3, reward=[0, 10, 20, 30])
+    write_train_log(tmp_path / "D8/1", q=[1.0, 50.0, 100.0, 150.0], lag=[0.02] * 4,
+                    reward=[0, 10, 20, 30, 40])
     write_run(tmp_path / "none/1", "none", 1, [0, 5.5, 7])
-    write_train_log(tmp_path / "none/1", q=[1.0, 2.0, 3.0], lag=[0.5] * 3, reward=[0, 10, 20, 30])
+    write_train_log(tmp_path / "none/1", q=[1.0, 2.0, 3.0, 4.0], lag=[0.5] * 4,
+                    reward=[0, 10, 20, 30, 40])
     write_run(tmp_path / "none/2", "none", 2, [0, 0, 0])  # no train.csv (e.g. copied evals only)
+    write_run(tmp_path / "none/10", "none", 10, [0, 0, 0])  # a log from before q_mean was logged
+    (tmp_path / "none/10/train.csv").write_text("env_step,wall_time,episode_reward\n1000,1.0,0\n")
     plot.main([str(tmp_path), "--runs"])
-    rows = {line.split("|")[1].strip() + line.split("|")[2].strip(): line
-            for line in capsys.readouterr().out.splitlines() if line.count("|") == 8}
-    assert "| 0 900 950 | 4 | 1 → 100 | 0.020–0.020 | hold |" in rows["group=D81"]
-    assert "| 0 5.5 7.0 | 4 |" in rows["group=none1"] and "does not track" in rows["group=none1"]
-    assert rows["group=none2"].endswith("| – | – | – | no train.csv |")
+    out = capsys.readouterr().out
+    lines = out[out.index("| group | seed | evaluation returns"):].splitlines()[2:]
+    rows = {tuple(cell.strip() for cell in line.split("|")[1:3]): line for line in lines}
+    assert list(rows) == [("group=D8", "1"), ("group=none", "1"), ("group=none", "2"),
+                          ("group=none", "10")]  # seeds in numeric order
+    assert "| 0 900 950 | 5 | 1 → 150 | 0.020–0.020 | hold |" in rows["group=D8", "1"]
+    assert "| 0 5.5 7.0 | 5 |" in rows["group=none", "1"]
+    assert "FAIL: target_lag reaches 0.500" in rows["group=none", "1"]
+    assert rows["group=none", "2"].endswith("| – | – | – | no train.csv |")
+    assert rows["group=none", "10"].endswith("| – | – | no update logged (q_mean, target_lag): not judged |")

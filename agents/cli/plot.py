@@ -183,18 +183,21 @@ def runs_table(groups: dict[str, list[Run]]) -> str:
     """One row per run: evaluation returns, wall time, Q half-way and at the end, the
     target network's lag late in training, and which TD invariants fail."""
     rows = ["| group | seed | evaluation returns | wall time (min) | Q half-way → end "
-            "| target_lag, last episodes | TD invariants |", "|---|---|---|---|---|---|---|"]
+            "| target_lag, second half | TD invariants |", "|---|---|---|---|---|---|---|"]
     for label, runs in groups.items():
-        for run in sorted(runs, key=lambda r: str(r.options.get("seed"))):
+        for run in sorted(runs, key=lambda r: str(r.options.get("seed")).zfill(12)):
             returns = " ".join(f"{r:.0f}" if abs(r) >= 10 or r == 0 else f"{r:.1f}" for r in run.returns)
             minutes = wall_minutes(run)
             wall = "–" if minutes is None else f"{minutes:.0f}"
-            if (run.path / "train.csv").exists():
+            try:
                 td = td_invariants(run.path / "train.csv")
+                verdict = f"FAIL: {'; '.join(td.failures)}" if td.failures else "hold"
                 cells = (f"{td.q_half:.3g} → {td.q_end:.3g} | {td.target_lag_low:.3f}–"
-                         f"{td.target_lag_high:.3f} | {'; '.join(td.failures) or 'hold'}")
-            else:
+                         f"{td.target_lag_high:.3f} | {'; '.join((verdict, *td.notes))}")
+            except FileNotFoundError:
                 cells = "– | – | no train.csv"
+            except ValueError:
+                cells = "– | – | no update logged (q_mean, target_lag): not judged"
             rows.append(f"| {label} | {run.options.get('seed')} | {returns} | {wall} | {cells} |")
     return "\n".join(rows)
 

@@ -31,6 +31,7 @@ MAX_TARGET_LAG = 0.25
 REWARD_SEEN = 1.0  # |mean episode reward| from which rewards count as seen (per episode)
 MAX_Q_WITHOUT_REWARD = 1.0  # |Q| after a run with no reward; healthy runs show ~0.02
 LAST_EPISODES = 50  # late training: the last episodes of the second half
+MIN_LATE_ROWS = 3  # fewer logged rows in the second half judge no lag (a run too short)
 
 
 @dataclass(frozen=True)
@@ -42,8 +43,9 @@ class TDInvariants:
     target_lag_low: float  # over late training (the last LAST_EPISODES of the second half)
     target_lag_high: float
     late_reward: float  # mean training episode reward over late training
-    run_reward: float  # total training episode reward of the run
+    run_reward: float  # total |training episode reward| of the run
     failures: tuple[str, ...]
+    notes: tuple[str, ...] = ()  # checks left unjudged, and why
 
 
 def _floats(rows: list[dict[str, str]], column: str) -> list[float]:
@@ -61,15 +63,23 @@ def td_invariants(train_csv: Path) -> TDInvariants:
     half = float(updated[-1]["env_step"]) / 2
     q_half = float(min(updated, key=lambda r: abs(float(r["env_step"]) - half))["q_mean"])
     q_end = float(updated[-1]["q_mean"])
-    late = [r for r in updated if float(r["env_step"]) > half][-LAST_EPISODES:] or updated[-1:]
+    late = [r for r in updated if float(r["env_step"]) > half][-LAST_EPISODES:]
     lags = _floats(late, "target_lag")
     late_rewards = _floats(late, "episode_reward")
+    rewards = _floats(rows, "episode_reward")
     late_reward = sum(late_rewards) / max(len(late_rewards), 1)
-    run_reward = sum(_floats(rows, "episode_reward"))
-    failures = []
+    run_reward = sum(abs(r) for r in rewards)
+    failures, notes = [], []
     if not (math.isfinite(q_half) and math.isfinite(q_end)):
         failures.append("Q is not finite")
-    if not lags or min(lags) <= 0:
+    if not all(math.isfinite(r) for r in rewards):
+        failures.append("an episode reward is not finite")
+    if len(lags) < MIN_LATE_ROWS:
+        notes.append(f"target_lag not judged ({len(lags)} logged in the second half, "
+                     f"fewer than {MIN_LATE_ROWS})")
+    elif not all(math.isfinite(x) for x in lags):
+        failures.append("target_lag is not finite")
+    elif min(lags) <= 0:
         failures.append("target_lag is 0: the target network is the online network")
     elif max(lags) > MAX_TARGET_LAG:
         failures.append(f"target_lag reaches {max(lags):.3f} > {MAX_TARGET_LAG} in the second half: "
@@ -77,7 +87,8 @@ def td_invariants(train_csv: Path) -> TDInvariants:
     if abs(late_reward) >= REWARD_SEEN and q_end * late_reward <= 0:
         failures.append(f"Q ends at {q_end:.3g}, not of the sign of the rewards seen "
                         f"({late_reward:.3g} per episode)")
-    if abs(run_reward) < REWARD_SEEN and abs(q_end) > MAX_Q_WITHOUT_REWARD:
+    if run_reward < REWARD_SEEN and abs(q_end) > MAX_Q_WITHOUT_REWARD:
         failures.append(f"Q ends at {q_end:.3g} with no reward seen (the TD fixed point is 0)")
-    return TDInvariants(q_half, q_end, min(lags, default=math.nan), max(lags, default=math.nan),
-                        late_reward, run_reward, tuple(failures))
+    lag_low, lag_high = (min(lags), max(lags)) if lags else (math.nan, math.nan)
+    return TDInvariants(q_half, q_end, lag_low, lag_high, late_reward, run_reward,
+                        tuple(failures), tuple(notes))
