@@ -163,6 +163,20 @@ LINE = {"dim": 2, "continuous_group": "O(2)", "exact_group": "D1",
         "action": [{"name": "push", "rep": "sign", "index": 0}]}
 
 
+def test_actuator_activations_are_refused_by_the_check(tmp_path):
+    """A filtered actuator carries state (MuJoCo's act) that no declaration moves."""
+    source = pathlib.Path(gymnasium.__file__).parent / "envs/mujoco/assets/reacher.xml"
+    motor = '<motor ctrllimited="true" ctrlrange="-1.0 1.0" gear="200.0" joint="joint0"/>'
+    text = source.read_text()
+    assert text.count(motor) == 1
+    (tmp_path / "filtered.xml").write_text(text.replace(
+        motor, motor.replace("<motor", "<general").replace("/>", ' dyntype="filter" dynprm="0.05"/>')))
+    env = declare(gymnasium.make("Reacher-v5", xml_file=str(tmp_path / "filtered.xml")), REACHER)
+    assert env.unwrapped.model.na == 1
+    with pytest.raises(ValueError, match="has 1 actuator activation state.*cannot move them"):
+        check_symmetry(env)
+
+
 def test_an_env_whose_state_cannot_be_set_gets_a_clear_error():
     env = declare(LinePlant(), LINE)
     with pytest.raises(ValueError, match="has no state, so check_symmetry cannot move the simulator"):
