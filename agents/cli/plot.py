@@ -183,7 +183,7 @@ def runs_table(groups: dict[str, list[Run]]) -> str:
     """One row per run: evaluation returns, wall time, Q half-way and at the end, the
     target network's lag late in training, and which TD invariants fail."""
     rows = ["| group | seed | evaluation returns | wall time (min) | Q half-way → end "
-            "| target_lag, second half | TD invariants |", "|---|---|---|---|---|---|---|"]
+            "| target_lag, second half (end) | TD invariants |", "|---|---|---|---|---|---|---|"]
     for label, runs in groups.items():
         for run in sorted(runs, key=lambda r: str(r.options.get("seed")).zfill(12)):
             returns = " ".join(f"{r:.0f}" if abs(r) >= 10 or r == 0 else f"{r:.1f}" for r in run.returns)
@@ -193,7 +193,8 @@ def runs_table(groups: dict[str, list[Run]]) -> str:
                 td = td_invariants(run.path / "train.csv")
                 verdict = f"FAIL: {'; '.join(td.failures)}" if td.failures else "hold"
                 cells = (f"{td.q_half:.3g} → {td.q_end:.3g} | {td.target_lag_low:.3f}–"
-                         f"{td.target_lag_high:.3f} | {'; '.join((verdict, *td.notes))}")
+                         f"{td.target_lag_high:.3f} ({td.target_lag_end:.3f}) | "
+                         f"{'; '.join((verdict, *td.notes))}")
             except FileNotFoundError:
                 cells = "– | – | no train.csv"
             except ValueError:

@@ -5,12 +5,13 @@ A learning curve alone cannot tell "the agent has not found the reward yet" from
 drifts without reward). These checks can, and each is cheap enough to run on
 every finished run (``geomdp-plot --runs``):
 
-- the target network tracks the online one: in the second half of the run,
-  ``target_lag`` (|online - target| / |online| over all parameters) stays above 0
-  (a target equal to the online network is no target) and below
-  ``MAX_TARGET_LAG`` (a frozen or lost target drifts away). The first updates are
-  left out: there the online network leaves its initialisation faster than any
-  soft update follows, and the lag spikes in healthy runs too;
+- the target network tracks the online one: ``target_lag`` (|online - target| /
+  |online| over all parameters) stays above 0 in the second half of the run (a
+  target equal to the online network is no target), and at the end of the run
+  (median of the last ``END_EPISODES``) is below ``MAX_TARGET_LAG`` (a frozen or
+  lost target drifts away and keeps drifting). Healthy runs spike where the
+  online network moves fast (after initialisation, when the reward is first
+  found), so the spikes are reported, not judged;
 - Q has the sign of the rewards seen late in training (a positive-reward task
   must not learn negative values, nor a cost task positive ones);
 - with (almost) no reward in the whole run, Q stays near 0 (the fixed point of
@@ -21,13 +22,16 @@ from __future__ import annotations
 
 import csv
 import math
+import statistics
 from dataclasses import dataclass
 from pathlib import Path
 
-# Healthy runs in results/ (50 of them): at most 0.18 in their second half. PointMass2D plain,
-# 10k steps, with the target update disabled (SoftUpdate.step a no-op): 0.05-0.07 until the
-# first rewards, then 0.27-0.33 from 7k steps on, growing.
-MAX_TARGET_LAG = 0.25
+# Healthy runs in results/ (53 on 2026-12-02): at most 0.063 at the end (spikes up to 0.23 in
+# the second half, when the reward is first found). PointMass2D plain, 10k steps, with the
+# target update disabled (SoftUpdate.step a no-op): 0.05-0.07 until the first rewards, then
+# 0.27-0.33 from 7k steps on, growing; 0.31 at the end.
+MAX_TARGET_LAG = 0.2
+END_EPISODES = 10
 REWARD_SEEN = 1.0  # |mean episode reward| from which rewards count as seen (per episode)
 MAX_Q_WITHOUT_REWARD = 1.0  # |Q| after a run with no reward; healthy runs show ~0.02
 LAST_EPISODES = 50  # late training: the last episodes of the second half
@@ -42,6 +46,7 @@ class TDInvariants:
     q_end: float  # q_mean at the last logged row
     target_lag_low: float  # over late training (the last LAST_EPISODES of the second half)
     target_lag_high: float
+    target_lag_end: float  # median of the last END_EPISODES logged rows
     late_reward: float  # mean training episode reward over late training
     run_reward: float  # total |training episode reward| of the run
     failures: tuple[str, ...]
@@ -81,14 +86,15 @@ def td_invariants(train_csv: Path) -> TDInvariants:
         failures.append("target_lag is not finite")
     elif min(lags) <= 0:
         failures.append("target_lag is 0: the target network is the online network")
-    elif max(lags) > MAX_TARGET_LAG:
-        failures.append(f"target_lag reaches {max(lags):.3f} > {MAX_TARGET_LAG} in the second half: "
-                        "the target network does not track the online one")
+    elif statistics.median(lags[-END_EPISODES:]) > MAX_TARGET_LAG:
+        failures.append(f"target_lag ends at {statistics.median(lags[-END_EPISODES:]):.3f} > "
+                        f"{MAX_TARGET_LAG}: the target network does not track the online one")
     if abs(late_reward) >= REWARD_SEEN and q_end * late_reward <= 0:
         failures.append(f"Q ends at {q_end:.3g}, not of the sign of the rewards seen "
                         f"({late_reward:.3g} per episode)")
     if run_reward < REWARD_SEEN and abs(q_end) > MAX_Q_WITHOUT_REWARD:
         failures.append(f"Q ends at {q_end:.3g} with no reward seen (the TD fixed point is 0)")
-    lag_low, lag_high = (min(lags), max(lags)) if lags else (math.nan, math.nan)
-    return TDInvariants(q_half, q_end, lag_low, lag_high, late_reward, run_reward,
+    lag_low, lag_high, lag_end = ((min(lags), max(lags), statistics.median(lags[-END_EPISODES:]))
+                                  if lags else (math.nan,) * 3)
+    return TDInvariants(q_half, q_end, lag_low, lag_high, lag_end, late_reward, run_reward,
                         tuple(failures), tuple(notes))
