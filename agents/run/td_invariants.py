@@ -70,6 +70,8 @@ def td_invariants(train_csv: Path) -> TDInvariants:
     q_end = float(updated[-1]["q_mean"])
     late = [r for r in updated if float(r["env_step"]) > half][-LAST_EPISODES:]
     lags = _floats(late, "target_lag")
+    lag_low, lag_high, lag_end = ((min(lags), max(lags), statistics.median(lags[-END_EPISODES:]))
+                                  if lags else (math.nan,) * 3)
     late_rewards = _floats(late, "episode_reward")
     rewards = _floats(rows, "episode_reward")
     late_reward = sum(late_rewards) / max(len(late_rewards), 1)
@@ -84,17 +86,15 @@ def td_invariants(train_csv: Path) -> TDInvariants:
                      f"fewer than {MIN_LATE_ROWS})")
     elif not all(math.isfinite(x) for x in lags):
         failures.append("target_lag is not finite")
-    elif min(lags) <= 0:
+    elif lag_low <= 0:
         failures.append("target_lag is 0: the target network is the online network")
-    elif statistics.median(lags[-END_EPISODES:]) > MAX_TARGET_LAG:
-        failures.append(f"target_lag ends at {statistics.median(lags[-END_EPISODES:]):.3f} > "
-                        f"{MAX_TARGET_LAG}: the target network does not track the online one")
+    elif lag_end > MAX_TARGET_LAG:
+        failures.append(f"target_lag ends at {lag_end:.3f} > {MAX_TARGET_LAG}: "
+                        "the target network does not track the online one")
     if abs(late_reward) >= REWARD_SEEN and q_end * late_reward <= 0:
         failures.append(f"Q ends at {q_end:.3g}, not of the sign of the rewards seen "
                         f"({late_reward:.3g} per episode)")
     if run_reward < REWARD_SEEN and abs(q_end) > MAX_Q_WITHOUT_REWARD:
         failures.append(f"Q ends at {q_end:.3g} with no reward seen (the TD fixed point is 0)")
-    lag_low, lag_high, lag_end = ((min(lags), max(lags), statistics.median(lags[-END_EPISODES:]))
-                                  if lags else (math.nan,) * 3)
     return TDInvariants(q_half, q_end, lag_low, lag_high, lag_end, late_reward, run_reward,
                         tuple(failures), tuple(notes))
