@@ -40,6 +40,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from agents.run.run_log import wall_minutes
+
 REPO = Path(__file__).resolve().parent.parent
 LOG_FILES_SKIPPED = ("checkpoint", "checkpoint.tmp", "checkpoint.old", ".geomdp-write-test",
                      "run_queue.pid", "run.lock")
@@ -124,13 +126,6 @@ def running_pid(run_dir: Path) -> int | None:
     except (OSError, ValueError):
         return None
     return pid
-
-
-def wall_minutes(run_dir: Path) -> float | None:
-    """A finished run's training wall time (evaluations included), from its logs."""
-    times = [float(row["wall_time"]) for name in ("eval.csv", "train.csv")
-             if (row := last_row(run_dir / name)) and row.get("wall_time")]
-    return max(times) / 60 if times else None
 
 
 def finished(run: Run, root: Path) -> bool:

@@ -93,6 +93,23 @@ def test_plot_pairs_runs_by_seed(tmp_path, capsys):
         plot.main([str(tmp_path), "--paired", "group=C4"])
 
 
+def test_plot_pairs_against_several_baselines_each_pair_once(tmp_path, capsys):
+    for seed, (plain, d4, d8) in enumerate([([0, 100], [0, 600], [0, 900]),
+                                            ([0, 0], [0, 500], [0, 700])], start=1):
+        for group, returns in (("none", plain), ("D4", d4), ("D8", d8)):
+            write_run(tmp_path / f"{group}/{seed}", group, seed, returns)
+    plot.main([str(tmp_path), "--paired", "group=none", "--paired", "group=D4"])
+    comparisons = [line.split("|")[1].strip() for line in capsys.readouterr().out.splitlines()
+                   if " − " in line]
+    assert sorted(comparisons) == ["group=D4 − group=none", "group=D8 − group=D4",
+                                   "group=D8 − group=none"]
+    # D8 - D4 over evaluations: seed 1 (450 - 300), seed 2 (350 - 250)
+    plot.main([str(tmp_path), "--paired", "group=D4"])
+    row = next(line for line in capsys.readouterr().out.splitlines()
+               if line.startswith("| group=D8 − group=D4"))
+    assert "| 2 | 1: +150.0, 2: +100.0 | +125.0 [" in row and "| 2 of 2 |" in row
+
+
 def test_plot_title_defaults_to_the_folder_the_runs_share(tmp_path):
     runs = [tmp_path / "sweep" / agent / "seed1" for agent in ("plain", "D8")]
     assert plot.default_title(runs) == "sweep"

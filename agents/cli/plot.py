@@ -12,7 +12,8 @@ that have reached it are used. Prints a markdown table of final returns (mean
 with 95% CI, IQM), of each seed's mean return over its evaluations (the area
 under its curve: sample efficiency; compare runs of equal length) and of the
 environment steps each seed took to reach ``--threshold``; with ``--paired GROUP``,
-every group against that one seed by seed (differences, bootstrap CI, paired t-test);
+every group against that one seed by seed (differences, bootstrap CI, paired t-test;
+repeat it to compare against several groups, each pair once);
 with ``--runs``, one row per run: its evaluations, wall time and the invariants of a
 working TD learner (``agents.run.td_invariants``), failures named.
 """
@@ -30,6 +31,7 @@ from omegaconf import OmegaConf
 from scipy import stats
 
 from agents.run.nested import flatten, with_added_later
+from agents.run.run_log import wall_minutes
 from agents.run.td_invariants import td_invariants
 
 IGNORED_KEYS = ("seed", "train.progress", "train.threads", "logger", "device",
@@ -134,49 +136,48 @@ def table(groups: dict[str, list[Run]], threshold: float | None) -> str:
     return "\n".join(rows)
 
 
-def paired_table(groups: dict[str, list[Run]], baseline: str) -> str:
-    """Every group against ``baseline``, seed by seed (runs of the same seed pair): the
-    per-seed differences of the mean return over all evaluations (the area under the
-    curve) and of the final return, their mean with a 95% bootstrap CI, a paired t-test
-    and on how many seeds the group did better. Only seeds both groups have count."""
-    if baseline not in groups:
-        raise SystemExit(f"geomdp-plot: error: --paired {baseline!r} is not a group; groups: "
+def paired_table(groups: dict[str, list[Run]], baselines: list[str]) -> str:
+    """Every group against each of ``baselines``, seed by seed (runs of the same seed
+    pair): the per-seed differences of the mean return over all evaluations (the area
+    under the curve) and of the final return, their mean with a 95% bootstrap CI, a
+    paired t-test and on how many seeds the group did better. Only seeds both groups have
+    count; a pair already compared (the other way round) is not repeated."""
+    unknown = [b for b in baselines if b not in groups]
+    if unknown:
+        raise SystemExit(f"geomdp-plot: error: --paired {unknown[0]!r} is not a group; groups: "
                          f"{', '.join(groups)}")
-    base = {r.options.get("seed"): r for r in groups[baseline]}
     rows = ["| comparison | seeds | per-seed difference, mean return over all evaluations "
             "| mean difference (95% CI) | paired t-test p | better on | final return: mean "
             "difference (95% CI), p |", "|---|---|---|---|---|---|---|"]
-    for label, runs in groups.items():
-        if label == baseline:
-            continue
-        pairs = sorted((r.options.get("seed"), r, base[r.options.get("seed")]) for r in runs
-                       if r.options.get("seed") in base)
-        if not pairs:
-            continue
-        area = np.array([a.returns.mean() - b.returns.mean() for _, a, b in pairs])
-        final = np.array([a.returns[-1] - b.returns[-1] for _, a, b in pairs])
-
-        def p_value(d: np.ndarray) -> str:
-            if len(d) < 2 or np.all(d == d[0]):
-                return "–"
-            return f"{stats.ttest_1samp(d, 0.0).pvalue:.3f}"
-
-        per_seed = ", ".join(f"{seed}: {d:+.1f}" for (seed, _, _), d in zip(pairs, area))
-        rows.append(f"| {label} − {baseline} | {len(pairs)} | {per_seed} | "
-                    "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(area))
-                    + f" | {p_value(area)} | {int((area > 0).sum())} of {len(pairs)} | "
-                    + "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(final)) + f", {p_value(final)} |")
+    compared: set[frozenset[str]] = set()
+    for baseline in baselines:
+        base = {r.options.get("seed"): r for r in groups[baseline]}
+        for label, runs in groups.items():
+            if label == baseline or frozenset((label, baseline)) in compared:
+                continue
+            compared.add(frozenset((label, baseline)))
+            pairs = sorted((r.options.get("seed"), r, base[r.options.get("seed")]) for r in runs
+                           if r.options.get("seed") in base)
+            if pairs:
+                rows.append(paired_row(f"{label} − {baseline}", pairs))
     return "\n".join(rows)
 
 
-def wall_minutes(run: Run) -> float | None:
-    """The run's wall time over all its sessions (evaluations included), in minutes."""
-    times = []
-    for name in ("train.csv", "eval.csv"):
-        if (run.path / name).exists():
-            with (run.path / name).open(newline="") as f:
-                times += [float(r["wall_time"]) for r in csv.DictReader(f) if r.get("wall_time")]
-    return max(times) / 60 if times else None
+def paired_row(comparison: str, pairs: list[tuple[object, Run, Run]]) -> str:
+    """One row of ``paired_table``: ``pairs`` are (seed, run, baseline run)."""
+    area = np.array([a.returns.mean() - b.returns.mean() for _, a, b in pairs])
+    final = np.array([a.returns[-1] - b.returns[-1] for _, a, b in pairs])
+
+    def p_value(d: np.ndarray) -> str:
+        if len(d) < 2 or np.all(d == d[0]):
+            return "–"
+        return f"{stats.ttest_1samp(d, 0.0).pvalue:.3f}"
+
+    per_seed = ", ".join(f"{seed}: {d:+.1f}" for (seed, _, _), d in zip(pairs, area))
+    return (f"| {comparison} | {len(pairs)} | {per_seed} | "
+            "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(area))
+            + f" | {p_value(area)} | {int((area > 0).sum())} of {len(pairs)} | "
+            + "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(final)) + f", {p_value(final)} |")
 
 
 def runs_table(groups: dict[str, list[Run]]) -> str:
@@ -187,7 +188,7 @@ def runs_table(groups: dict[str, list[Run]]) -> str:
     for label, runs in groups.items():
         for run in sorted(runs, key=lambda r: str(r.options.get("seed")).zfill(12)):
             returns = " ".join(f"{r:.0f}" if abs(r) >= 10 or r == 0 else f"{r:.1f}" for r in run.returns)
-            minutes = wall_minutes(run)
+            minutes = wall_minutes(run.path)
             wall = "–" if minutes is None else f"{minutes:.0f}"
             try:
                 td = td_invariants(run.path / "train.csv")
@@ -250,9 +251,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--ignore", action="append", default=[],
                         help="an option not to group runs by (e.g. one added later with a "
                              "default that changes nothing: agent.networks.layers)")
-    parser.add_argument("--paired", metavar="GROUP", default=None,
+    parser.add_argument("--paired", metavar="GROUP", action="append", default=[],
                         help="also compare every group with this one seed by seed "
-                             "(a label of the table, e.g. 'group=none')")
+                             "(a label of the table, e.g. 'group=none'); repeat it for "
+                             "more baselines")
     parser.add_argument("--runs", action="store_true",
                         help="also list every run: evaluations, wall time, TD learner invariants")
     args = parser.parse_args(argv)
@@ -268,7 +270,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.out:
         plot(groups, args.out, args.title or default_title(args.paths), references)
     text = table(groups, args.threshold)
-    if args.paired is not None:
+    if args.paired:
         text += "\n\n" + paired_table(groups, args.paired)
     if args.runs:
         text += "\n\n" + runs_table(groups)

@@ -78,6 +78,17 @@ SESSION_COLUMNS = ["env_step", "started", "git_commit", "git_dirty", "torch", "e
 _CODE_ROOT = Path(__file__).resolve().parents[2]
 
 
+def wall_minutes(run_dir: Path) -> float | None:
+    """A run's wall time over all its sessions (evaluations included), in minutes, from
+    its tables (``wall_time`` accumulates across resumes); None when nothing is logged."""
+    times = []
+    for table in ("train.csv", "eval.csv"):
+        if (run_dir / table).exists():
+            with (run_dir / table).open(newline="") as f:
+                times += [float(r["wall_time"]) for r in csv.DictReader(f) if r.get("wall_time")]
+    return max(times) / 60 if times else None
+
+
 def code_version() -> dict[str, str]:
     """The git commit of the code this process imported (``unknown`` outside a git
     checkout) and whether its tracked sources differ from that commit."""
