@@ -11,6 +11,7 @@ from test_train import TINY, TRAIN
 
 from agents.cli import plot
 from agents.cli.train import CONFIG_DIR
+from agents.run.run_log import evaluation_share, wall_minutes
 from agents.run.td_invariants import td_invariants
 
 EXPERIMENTS = sorted(p.stem for p in (CONFIG_DIR / "experiment").glob("*.yaml"))
@@ -196,3 +197,20 @@ def test_plot_lists_runs_with_their_td_invariants(tmp_path, capsys):
     assert "FAIL: target_lag ends at 0.500" in rows["group=none", "1"]
     assert rows["group=none", "2"].endswith("| – | – | – | no train.csv |")
     assert rows["group=none", "10"].endswith("| – | – | no update logged (q_mean, target_lag): not judged |")
+
+
+def test_evaluation_share_is_the_wall_time_not_spent_training(tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    # 1000 env steps at 100/s (10 s) and 1000 at 50/s (20 s): 30 s of training
+    (run / "train.csv").write_text("env_step,wall_time,steps_per_second\n"
+                                   "1000,10.0,100\n2000,30.0,50\n")
+    (run / "eval.csv").write_text("env_step,wall_time,episode_reward\n0,0.0,0\n2000,60.0,5\n")
+    assert wall_minutes(run) == 1.0 and evaluation_share(run) == pytest.approx(0.5)
+    write_run(tmp_path / "plot/D8/1", "D8", 1, [0, 5])
+    for name in ("train.csv", "eval.csv"):
+        (tmp_path / "plot/D8/1" / name).write_text((run / name).read_text())
+    plot.main([str(tmp_path / "plot"), "--runs"])
+    assert "| 0 5.0 | 1 (50%) |" in capsys.readouterr().out
+    (run / "train.csv").write_text("env_step,wall_time\n1000,10.0\n")  # a log from before
+    assert evaluation_share(run) is None and evaluation_share(tmp_path / "missing") is None

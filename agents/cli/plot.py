@@ -31,7 +31,7 @@ from omegaconf import OmegaConf
 from scipy import stats
 
 from agents.run.nested import flatten, with_added_later
-from agents.run.run_log import wall_minutes
+from agents.run.run_log import evaluation_share, wall_minutes
 from agents.run.td_invariants import td_invariants
 
 IGNORED_KEYS = ("seed", "train.progress", "train.threads", "logger", "device",
@@ -181,15 +181,18 @@ def paired_row(comparison: str, pairs: list[tuple[object, Run, Run]]) -> str:
 
 
 def runs_table(groups: dict[str, list[Run]]) -> str:
-    """One row per run: evaluation returns, wall time, Q half-way and at the end, the
-    target network's lag late in training, and which TD invariants fail."""
-    rows = ["| group | seed | evaluation returns | wall time (min) | Q half-way → end "
+    """One row per run: evaluation returns, wall time (and the share of it spent
+    evaluating), Q half-way and at the end, the target network's lag late in training,
+    and which TD invariants fail."""
+    rows = ["| group | seed | evaluation returns | wall time (min; evaluation share) | Q half-way → end "
             "| target_lag, second half (end) | TD invariants |", "|---|---|---|---|---|---|---|"]
     for label, runs in groups.items():
         for run in sorted(runs, key=lambda r: str(r.options.get("seed")).zfill(12)):
             returns = " ".join(f"{r:.0f}" if abs(r) >= 10 or r == 0 else f"{r:.1f}" for r in run.returns)
-            minutes = wall_minutes(run.path)
+            minutes, share = wall_minutes(run.path), evaluation_share(run.path)
             wall = "–" if minutes is None else f"{minutes:.0f}"
+            if share is not None:
+                wall += f" ({100 * share:.0f}%)"
             try:
                 td = td_invariants(run.path / "train.csv")
                 verdict = f"FAIL: {'; '.join(td.failures)}" if td.failures else "hold"

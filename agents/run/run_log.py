@@ -89,6 +89,27 @@ def wall_minutes(run_dir: Path) -> float | None:
     return max(times) / 60 if times else None
 
 
+def evaluation_share(run_dir: Path) -> float | None:
+    """The share of a run's wall time spent evaluating (the evaluation at step 0 aside),
+    from its tables: training time is each episode's env steps over its logged
+    ``steps_per_second`` (collection and updates), the rest of ``wall_time`` is
+    evaluation. None for logs without those columns."""
+    total = wall_minutes(run_dir)
+    try:
+        with (run_dir / "train.csv").open(newline="") as f:
+            rows = [r for r in csv.DictReader(f) if r.get("steps_per_second")]
+    except OSError:
+        return None
+    if not total or not rows:
+        return None
+    training, previous = 0.0, 0
+    for row in rows:
+        step = int(float(row["env_step"]))
+        training += (step - previous) / float(row["steps_per_second"])
+        previous = step
+    return max(0.0, 1 - training / (60 * total))
+
+
 def code_version() -> dict[str, str]:
     """The git commit of the code this process imported (``unknown`` outside a git
     checkout) and whether its tracked sources differ from that commit."""
