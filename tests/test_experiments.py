@@ -65,6 +65,10 @@ def test_plot_handles_unequal_and_unfinished_runs(tmp_path, capsys):
     assert ("| group=D8 | 1 | 3000 | 960.0 [960.0, 960.0] | 960.0 | 702.5 [702.5, 702.5] | – "
             "| 1000 |") in table
     assert "3000, 2000 |" in table  # steps to 800, per seed
+    plot.main([str(tmp_path), "--threshold", "800", "--threshold", "880"])  # a column each
+    table = capsys.readouterr().out
+    assert "| env steps to reach 800 (per seed) | env steps to reach 880 (per seed) |" in table
+    assert "| 3000, 2000 | 3000, – |" in table and "| 1000 | 1000 |" in table
     runs = plot.group_runs(plot.find_runs([tmp_path]))
     steps, mean, low, high, n = plot.curve(runs["group=none"])
     assert list(n) == [2, 2, 2, 1] and low[2] <= mean[2] <= high[2]

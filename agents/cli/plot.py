@@ -11,7 +11,7 @@ length, or still in progress, are fine: at each evaluation step, the seeds
 that have reached it are used. Prints a markdown table of final returns (mean
 with 95% CI, IQM), of each seed's mean return over its evaluations (the area
 under its curve: sample efficiency; compare runs of equal length) and of the
-environment steps each seed took to reach ``--threshold``; with ``--paired GROUP``,
+environment steps each seed took to reach each ``--threshold``; with ``--paired GROUP``,
 every group against that one seed by seed (differences, bootstrap CI, paired t-test;
 repeat it to compare against several groups, each pair once);
 with ``--runs``, one row per run: its evaluations, wall time and the invariants of a
@@ -107,12 +107,12 @@ def steps_to_threshold(run: Run, threshold: float) -> int | None:
     return int(reached[0]) if len(reached) else None
 
 
-def table(groups: dict[str, list[Run]], threshold: float | None) -> str:
+def table(groups: dict[str, list[Run]], thresholds: list[float]) -> str:
     header = ("| runs | seeds | env steps | final return (mean, 95% CI) | IQM "
               "| mean return over all evaluations (mean, 95% CI) "
               "| final return with training noise (mean, 95% CI) |")
     sep = "|---|---|---|---|---|---|---|"
-    if threshold is not None:
+    for threshold in thresholds:
         header += f" env steps to reach {threshold:g} (per seed) |"
         sep += "---|"
     rows = [header, sep]
@@ -129,7 +129,7 @@ def table(groups: dict[str, list[Run]], threshold: float | None) -> str:
             *mean_ci(np.array([r.returns.mean() for r in runs])))
         row = (f"| {label} | {len(runs)} | {'/'.join(map(str, steps))} | "
                f"{mean:.1f} [{low:.1f}, {high:.1f}] | {iqm:.1f} | {area_cell} | {noisy_cell} |")
-        if threshold is not None:
+        for threshold in thresholds:
             reached = [steps_to_threshold(r, threshold) for r in runs]
             row += " " + ", ".join("–" if s is None else str(s) for s in reached) + " |"
         rows.append(row)
@@ -244,8 +244,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("paths", nargs="+", type=Path, help="directories holding run directories")
     parser.add_argument("--out", type=Path, help="PNG to write")
     parser.add_argument("--title", default=None)
-    parser.add_argument("--threshold", type=float, default=None,
-                        help="report env steps to reach this return")
+    parser.add_argument("--threshold", type=float, action="append", default=[],
+                        help="report env steps to reach this return (repeatable: a column each)")
     parser.add_argument("--reference", action="append", default=[],
                         help="VALUE:NAME, a horizontal line (e.g. 884:LQR oracle)")
     parser.add_argument("--markdown", type=Path, help="also write the table to this file")
