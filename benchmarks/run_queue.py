@@ -13,6 +13,9 @@ it), at most ``--parallel`` at a time with one torch thread each, before a deadl
 - each finished run's logs (never its checkpoints) are copied into the checkout's
   ``results/`` and committed at once, after checking that every session of the run
   used the pinned commit with no local changes (``sessions.csv``).
+- trainers run in sessions of their own, so a queue killed outright (SIGKILL, e.g. to
+  give it another deadline) leaves them training; the next queue on the same plan
+  adopts them: they hold their slots, and are collected or stopped like its own.
 
 A plan has one run per line, ``<results dir> <env steps> <override>...``; ``#`` starts
 a comment. The same plan given again skips finished runs and resumes the others::
@@ -119,13 +122,51 @@ def checkpoint_step(run_dir: Path) -> int | None:
 
 
 def running_pid(run_dir: Path) -> int | None:
-    """The process a queue started on this run directory, if it is still alive."""
+    """The process a queue started on this run directory, if it is still alive (and, where
+    ``/proc`` tells, still trains this directory: a process id can be reused)."""
     try:
         pid = int((run_dir / PID_FILE).read_text())
         os.kill(pid, 0)
     except (OSError, ValueError):
         return None
+    cmdline = Path(f"/proc/{pid}/cmdline")
+    try:
+        if f"hydra.run.dir={run_dir}" not in cmdline.read_bytes().decode(errors="replace").split("\0"):
+            return None
+    except OSError:
+        if cmdline.parent.parent.exists():  # /proc exists but not this pid: it has ended
+            return None
     return pid
+
+
+class AdoptedProcess:
+    """A trainer that an earlier queue started and that outlived it (that queue was
+    killed, e.g. to change its deadline): watched through its process id, as it is not
+    this queue's child. Its exit status is unknown, so it is inferred: finished (0) if
+    its logs reach its steps, stopped at its checkpoint (130) after this queue's SIGTERM,
+    failed (1) otherwise."""
+
+    def __init__(self, pid: int, run: Run) -> None:
+        self.pid, self.run, self.terminated = pid, run, False
+
+    def poll(self) -> int | None:
+        if running_pid(self.run.work) == self.pid:
+            return None
+        if logged_step(self.run.work) >= self.run.steps:
+            return 0
+        return 130 if self.terminated else 1
+
+    def send_signal(self, sig: int) -> None:
+        self.terminated |= sig == signal.SIGTERM
+        os.kill(self.pid, sig)
+
+    def kill(self) -> None:
+        self.send_signal(signal.SIGKILL)
+
+    def wait(self) -> int:
+        while (status := self.poll()) is None:
+            time.sleep(0.2)
+        return status
 
 
 def finished(run: Run, root: Path) -> bool:
@@ -281,7 +322,7 @@ class Queue:
         self.poll_seconds, self.stop_grace_seconds = poll_seconds, stop_grace_seconds
         for run in runs:
             run.work = worktree / run.dest
-        self.running: dict[str, tuple[Run, subprocess.Popen, dt.datetime]] = {}
+        self.running: dict[str, tuple[Run, subprocess.Popen | AdoptedProcess, dt.datetime]] = {}
         self.failed: set[str] = set()
 
     def minutes_left(self, now: dt.datetime) -> float:
@@ -316,6 +357,15 @@ class Queue:
                 outcome = commit_results(self.repo, run.dest, f"Run queue: {run.dest} finished "
                                          f"({run.steps} env steps, code {self.commit[:10]})")
                 say(f"committed the logs of {run.dest} a stopped queue had left: {outcome}")
+
+    def adopt_running(self) -> None:
+        """Runs of the plan that an earlier queue started and that are still training
+        count as running here: watched, collected, stopped at the deadline."""
+        for run in self.pending():
+            if (pid := running_pid(run.work)) is not None:
+                self.running[run.dest] = (run, AdoptedProcess(pid, run), dt.datetime.now())
+                say(f"adopted {run.dest}: process {pid}, started by an earlier queue, still "
+                    "training")
 
     def start(self, run: Run) -> None:
         run.work.mkdir(parents=True, exist_ok=True)
@@ -411,6 +461,7 @@ class Queue:
 
     def _run(self) -> int:
         self.collect_finished_work()
+        self.adopt_running()
         last_report = time.monotonic()
         try:
             while True:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import datetime as dt
 import importlib.util
+import os
+import shlex
 import subprocess
 import sys
 import textwrap
@@ -187,6 +189,43 @@ def test_deadline_stops_runs_with_sigterm_and_they_resume(repo: Path) -> None:
     assert queue.run() == 0
     assert f"resuming from its checkpoint at env step {step}" in (run.work / "stdout.log").read_text()
     assert rq.logged_step(repo / run.dest) == step + 2
+
+
+def start_outside_the_queue(queue: rq.Queue, run: rq.Run) -> int:
+    """A trainer started by an earlier queue that was then killed: not this process's
+    child (the shell that started it exits), its process id in the run directory."""
+    run.work.mkdir(parents=True, exist_ok=True)
+    command = shlex.join(run.argv(sys.executable, "fake_train"))
+    pid = int(subprocess.run(["sh", "-c", f"{command} > /dev/null 2>&1 & echo $!"],
+                             cwd=queue.worktree, check=True, capture_output=True,
+                             text=True).stdout)
+    (run.work / rq.PID_FILE).write_text(str(pid))
+    return pid
+
+
+def test_a_restarted_queue_adopts_runs_still_training(repo: Path, capsys) -> None:
+    # an adopted run that the deadline stops is reported stopped, not failed
+    plan = "results/x/long/seed1 100000 delay=0.01\n"
+    queue = make_queue(repo, plan, minutes_left=0.02, estimates=rq.parse_estimates(["*=0.01"]))
+    start_outside_the_queue(queue, queue.runs[0])
+    assert queue.run() == 0
+    assert "stopped results/x/long/seed1 at its checkpoint" in capsys.readouterr().out
+    assert rq.checkpoint_step(queue.runs[0].work) and not (repo / "results/x/long").exists()
+    # a process id written there whose process trains something else is not adopted
+    (queue.runs[0].work / rq.PID_FILE).write_text(str(os.getpid()))
+    assert rq.running_pid(queue.runs[0].work) is None
+    # an adopted run holds a slot until it finishes, and is collected
+    plan = "results/x/a/seed1 40 delay=0.01\nresults/x/a/seed2 3 delay=0.01\n"
+    queue = make_queue(repo, plan, minutes_left=60, estimates=rq.parse_estimates(["*=0.01"]),
+                       parallel=1)
+    pid = start_outside_the_queue(queue, queue.runs[0])
+    assert rq.running_pid(queue.runs[0].work) == pid
+    assert queue.run() == 0
+    out = capsys.readouterr().out
+    assert f"adopted results/x/a/seed1: process {pid}" in out
+    assert out.index("finished results/x/a/seed1") < out.index("starting: results/x/a/seed2")
+    assert rq.logged_step(repo / "results/x/a/seed1") == 40
+    assert "results/x/a/seed2 finished" in git(repo, "log", "-1", "--format=%s")
 
 
 def test_runs_from_another_commit_are_not_collected(repo: Path) -> None:
