@@ -12,7 +12,7 @@ it), at most ``--parallel`` at a time with one torch thread each, before a deadl
   ``stdout.log``);
 - each finished run's logs (never its checkpoints) are copied into the checkout's
   ``results/`` and committed at once, after checking that every session of the run
-  used the pinned commit with no local changes (``sessions.csv``).
+  used the pinned commit with no local changes (``sessions.csv``);
 - trainers run in sessions of their own, so a queue killed outright (SIGKILL, e.g. to
   give it another deadline) leaves them training; the next queue on the same plan
   adopts them: they hold their slots, and are collected or stopped like its own.
