@@ -8,6 +8,7 @@ import datetime as dt
 import importlib.util
 import os
 import shlex
+import signal
 import subprocess
 import sys
 import textwrap
@@ -191,19 +192,34 @@ def test_deadline_stops_runs_with_sigterm_and_they_resume(repo: Path) -> None:
     assert rq.logged_step(repo / run.dest) == step + 2
 
 
-def start_outside_the_queue(queue: rq.Queue, run: rq.Run) -> int:
-    """A trainer started by an earlier queue that was then killed: not this process's
-    child (the shell that started it exits), its process id in the run directory."""
-    run.work.mkdir(parents=True, exist_ok=True)
-    command = shlex.join(run.argv(sys.executable, "fake_train"))
-    pid = int(subprocess.run(["sh", "-c", f"{command} > /dev/null 2>&1 & echo $!"],
-                             cwd=queue.worktree, check=True, capture_output=True,
-                             text=True).stdout)
-    (run.work / rq.PID_FILE).write_text(str(pid))
-    return pid
+@pytest.fixture
+def start_outside_the_queue():
+    """Starts a trainer as an earlier, since killed, queue would have: not this process's
+    child (the shell that starts it exits), its process id in the run directory. Any
+    still alive at the end of the test (it failed) is killed."""
+    pids = []
+
+    def start(queue: rq.Queue, run: rq.Run) -> int:
+        run.work.mkdir(parents=True, exist_ok=True)
+        command = shlex.join(run.argv(sys.executable, "fake_train"))
+        pid = int(subprocess.run(["sh", "-c", f"{command} > /dev/null 2>&1 & echo $!"],
+                                 cwd=queue.worktree, check=True, capture_output=True,
+                                 text=True).stdout)
+        (run.work / rq.PID_FILE).write_text(str(pid))
+        pids.append(pid)
+        return pid
+
+    yield start
+    for pid in pids:
+        try:
+            if b"fake_train" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
 
 
-def test_a_restarted_queue_adopts_runs_still_training(repo: Path, capsys) -> None:
+def test_a_restarted_queue_adopts_runs_still_training(repo: Path, capsys,
+                                                      start_outside_the_queue) -> None:
     # an adopted run that the deadline stops is reported stopped, not failed
     plan = "results/x/long/seed1 100000 delay=0.01\n"
     queue = make_queue(repo, plan, minutes_left=0.02, estimates=rq.parse_estimates(["*=0.01"]))
