@@ -113,6 +113,14 @@ def test_plot_pairs_against_several_baselines_each_pair_once(tmp_path, capsys):
     row = next(line for line in capsys.readouterr().out.splitlines()
                if line.startswith("| group=D8 − group=D4"))
     assert "| 2 | 1: +150.0, 2: +100.0 | +125.0 [" in row and "| 2 of 2 |" in row
+    # a p-value below 0.001 is written in full, not rounded to 0.000
+    for seed, (plain, d8) in enumerate([([0, 0], [0, 700]), ([0, 0], [0, 702]),
+                                        ([0, 0], [0, 699]), ([0, 0], [0, 701])], start=1):
+        write_run(tmp_path / f"more/none/{seed}", "none", seed, plain)
+        write_run(tmp_path / f"more/D8/{seed}", "D8", seed, d8)
+    plot.main([str(tmp_path / "more"), "--paired", "group=none"])
+    row = next(line for line in capsys.readouterr().out.splitlines() if " − " in line)
+    assert 0 < float(row.split("|")[5]) < 0.001 and "e-" in row.split("|")[5]
 
 
 def test_plot_title_defaults_to_the_folder_the_runs_share(tmp_path):

@@ -171,7 +171,8 @@ def paired_row(comparison: str, pairs: list[tuple[object, Run, Run]]) -> str:
     def p_value(d: np.ndarray) -> str:
         if len(d) < 2 or np.all(d == d[0]):
             return "–"
-        return f"{stats.ttest_1samp(d, 0.0).pvalue:.3f}"
+        p = stats.ttest_1samp(d, 0.0).pvalue
+        return f"{p:.3f}" if p >= 0.001 else f"{p:.1e}"  # never a bare 0.000
 
     per_seed = ", ".join(f"{seed}: {d:+.1f}" for (seed, _, _), d in zip(pairs, area))
     return (f"| {comparison} | {len(pairs)} | {per_seed} | "
