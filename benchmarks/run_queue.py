@@ -43,7 +43,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from agents.run.run_log import wall_minutes
+from agents.run.run_tables import wall_minutes
 
 REPO = Path(__file__).resolve().parent.parent
 LOG_FILES_SKIPPED = ("checkpoint", "checkpoint.tmp", "checkpoint.old", ".geomdp-write-test",

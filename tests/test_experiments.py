@@ -11,7 +11,7 @@ from test_train import TINY, TRAIN
 
 from agents.cli import plot
 from agents.cli.train import CONFIG_DIR
-from agents.run.run_log import evaluation_share, wall_minutes
+from agents.run.run_tables import evaluation_share, wall_minutes
 from agents.run.td_invariants import td_invariants
 
 EXPERIMENTS = sorted(p.stem for p in (CONFIG_DIR / "experiment").glob("*.yaml"))

@@ -31,7 +31,7 @@ from omegaconf import OmegaConf
 from scipy import stats
 
 from agents.run.nested import flatten, with_added_later
-from agents.run.run_log import evaluation_share, wall_minutes
+from agents.run.run_tables import evaluation_share, wall_minutes
 from agents.run.td_invariants import td_invariants
 
 IGNORED_KEYS = ("seed", "train.progress", "train.threads", "logger", "device",

@@ -39,7 +39,8 @@ from agents.run.run_dir import (
     remove_if_only_hydra_files,
     write_records,
 )
-from agents.run.run_log import RunLog, RunLogError
+from agents.run.run_log import RunLog
+from agents.run.run_tables import RunLogError
 from agents.run.trainer import StopRequest, Trainer, build_parts
 
 

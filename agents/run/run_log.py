@@ -1,15 +1,14 @@
-"""A run's logs: ``eval.csv`` and ``train.csv`` tables, plus TorchRL's loggers.
+"""Writing a run's logs: its tables (``agents.run.run_tables``), plus TorchRL's loggers.
 
-The two tables are the run's record (one row per evaluation / per update
-round, fixed columns), read by plotting and by resume: on resume, rows logged
-after the last checkpoint are dropped, since the run will log them again.
-Every row is also sent to TorchRL's ``CSVLogger`` (one file per scalar) and,
-when the ``tensorboard`` package is installed, its ``TensorboardLogger``.
+The tables are the run's record (one row per evaluation / per update round, fixed
+columns), read by plotting and by resume: on resume, rows logged after the last
+checkpoint are dropped, since the run will log them again. Every row is also sent to
+TorchRL's ``CSVLogger`` (one file per scalar) and, when the ``tensorboard`` package is
+installed, its ``TensorboardLogger``.
 """
 
 from __future__ import annotations
 
-import csv
 import datetime
 import importlib.metadata
 import importlib.util
@@ -19,95 +18,9 @@ from pathlib import Path
 
 from torchrl.record.loggers import CSVLogger, Logger, TensorboardLogger
 
+from agents.run.run_tables import EVAL_COLUMNS, SESSION_COLUMNS, TRAIN_COLUMNS, CsvTable
 
-class RunLogError(ValueError):
-    """A run directory's logs that this version cannot continue."""
-
-
-class CsvTable:
-    """Append-only CSV with a fixed header, flushed after every row."""
-
-    def __init__(self, path: Path, columns: list[str]) -> None:
-        self.path, self.columns = path, columns
-        if not path.exists():
-            with path.open("w", newline="") as f:
-                csv.writer(f).writerow(columns)
-        else:
-            with path.open(newline="") as f:
-                header = next(csv.reader(f), [])
-            if header != columns:
-                raise RunLogError(f"{path} has other columns than this version writes "
-                                 "(made by an older version?): use another hydra.run.dir")
-
-    def append(self, row: dict[str, float]) -> None:
-        with self.path.open("a", newline="") as f:
-            csv.writer(f).writerow([row.get(c, "") for c in self.columns])
-
-    def rows(self) -> list[dict[str, str]]:
-        with self.path.open(newline="") as f:
-            return list(csv.DictReader(f))
-
-    def truncate_after(self, env_step: int) -> int:
-        """Drop rows with ``env_step`` beyond the given one; returns how many."""
-        rows = self.rows()
-        kept = [r for r in rows if int(float(r["env_step"])) <= env_step]
-        with self.path.open("w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=self.columns)
-            writer.writeheader()
-            writer.writerows(kept)
-        return len(rows) - len(kept)
-
-
-# episode_reward: planner without exploration noise (TD-MPC's evaluation);
-# noisy_episode_reward: with the training noise at that step (the training episodes' setting).
-EVAL_COLUMNS = ["env_step", "agent_step", "episode", "wall_time", "episode_reward",
-                "episode_reward_std", "eval_episodes", "noisy_episode_reward",
-                "noisy_episode_reward_std", "noisy_eval_episodes"]
-# q_mean / td_target_mean: the TD learner's health (they grow toward the return scale);
-# target_lag: |online - target| / |online| over all parameters (the target must track).
-TRAIN_COLUMNS = ["env_step", "agent_step", "episode", "wall_time", "updates", "loss_model",
-                 "loss_pi", "consistency", "reward_error", "value_error", "q_mean",
-                 "td_target_mean", "target_lag", "model_grad_norm", "policy_grad_norm",
-                 "episode_reward", "steps_per_second"]
-
-
-# One row per start or resume: which code made which steps (a run resumed in another
-# session may run other code; float rounding differs between versions).
-SESSION_COLUMNS = ["env_step", "started", "git_commit", "git_dirty", "torch", "escnn",
-                   "torchrl", "host"]
 _CODE_ROOT = Path(__file__).resolve().parents[2]
-
-
-def wall_minutes(run_dir: Path) -> float | None:
-    """A run's wall time over all its sessions (evaluations included), in minutes, from
-    its tables (``wall_time`` accumulates across resumes); None when nothing is logged."""
-    times = []
-    for table in ("train.csv", "eval.csv"):
-        if (run_dir / table).exists():
-            with (run_dir / table).open(newline="") as f:
-                times += [float(r["wall_time"]) for r in csv.DictReader(f) if r.get("wall_time")]
-    return max(times) / 60 if times else None
-
-
-def evaluation_share(run_dir: Path) -> float | None:
-    """The share of a run's wall time spent evaluating (the evaluation at step 0 aside),
-    from its tables: training time is each episode's env steps over its logged
-    ``steps_per_second`` (collection and updates), the rest of ``wall_time`` is
-    evaluation. None for logs without those columns."""
-    total = wall_minutes(run_dir)
-    try:
-        with (run_dir / "train.csv").open(newline="") as f:
-            rows = [r for r in csv.DictReader(f) if r.get("steps_per_second")]
-    except OSError:
-        return None
-    if not total or not rows:
-        return None
-    training, previous = 0.0, 0
-    for row in rows:
-        step = int(float(row["env_step"]))
-        training += (step - previous) / float(row["steps_per_second"])
-        previous = step
-    return max(0.0, 1 - training / (60 * total))
 
 
 def code_version() -> dict[str, str]:
