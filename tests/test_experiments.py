@@ -123,6 +123,25 @@ def test_plot_pairs_against_several_baselines_each_pair_once(tmp_path, capsys):
     assert 0 < float(row.split("|")[5]) < 0.001 and "e-" in row.split("|")[5]
 
 
+def test_plot_labels_rename_groups_everywhere(tmp_path, capsys):
+    for seed in (1, 2):
+        write_run(tmp_path / f"none/{seed}", "none", seed, [0, 100 * seed])
+        write_run(tmp_path / f"D8/{seed}", "D8", seed, [0, 900])
+    out = tmp_path / "curves.png"
+    # --paired may name the group by either name
+    for baseline in ("group=none", "plain"):
+        plot.main([str(tmp_path), "--label", "group=none:plain", "--label", "group=D8:D8 `linear`",
+                   "--paired", baseline, "--runs", "--out", str(out)])
+        text = capsys.readouterr().out
+        assert "group=" not in text
+        assert "| plain | 2 |" in text and "| D8 `linear` − plain | 2 |" in text
+        assert "| D8 `linear` | 1 |" in text  # the runs table
+    for bad, message in (("group=none", "is not GROUP:NAME"), ("group=C4:x", "is not a group"),
+                         ("group=none:group=D8", "already names a group")):
+        with pytest.raises(SystemExit, match=message):
+            plot.main([str(tmp_path), "--label", bad])
+
+
 def test_plot_title_defaults_to_the_folder_the_runs_share(tmp_path):
     runs = [tmp_path / "sweep" / agent / "seed1" for agent in ("plain", "D8")]
     assert plot.default_title(runs) == "sweep"

@@ -233,6 +233,27 @@ def plot(groups: dict[str, list[Run]], out: Path, title: str,
     plt.close(fig)
 
 
+def rename_groups(groups: dict[str, list[Run]], labels: list[str]) -> dict[str, str]:
+    """Apply ``--label GROUP:NAME`` (a table's label to the name a reader should see, e.g.
+    ``group=none:plain``) to ``groups`` in place; returns the renaming, so that options
+    naming a group (``--paired``) accept either name."""
+    renamed: dict[str, str] = {}
+    for spec in labels:
+        old, sep, new = spec.partition(":")
+        if not sep or not new:
+            raise SystemExit(f"geomdp-plot: error: --label {spec!r} is not GROUP:NAME "
+                             "(e.g. 'group=none:plain')")
+        if old not in groups:
+            raise SystemExit(f"geomdp-plot: error: --label {old!r} is not a group; groups: "
+                             f"{', '.join(groups)}")
+        if new in groups or new in renamed.values():
+            raise SystemExit(f"geomdp-plot: error: --label {spec!r}: {new!r} already names a group")
+        renamed[old] = new
+    for old in list(groups):  # rebuilt in order, so that the table keeps the groups' order
+        groups[renamed.get(old, old)] = groups.pop(old)
+    return renamed
+
+
 def default_title(paths: list[Path]) -> str:
     """The name of the folder the runs share (``pointmass2d_cpu`` for
     ``results/pointmass2d_cpu/{plain,D8}/seed1``), not the first path's name, which for
@@ -259,6 +280,9 @@ def main(argv: list[str] | None = None) -> None:
                         help="also compare every group with this one seed by seed "
                              "(a label of the table, e.g. 'group=none'); repeat it for "
                              "more baselines")
+    parser.add_argument("--label", metavar="GROUP:NAME", action="append", default=[],
+                        help="show a group under another name in the table and the plot "
+                             "(e.g. 'group=none:plain'); repeatable")
     parser.add_argument("--runs", action="store_true",
                         help="also list every run: evaluations, wall time, TD learner invariants")
     args = parser.parse_args(argv)
@@ -267,6 +291,8 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(f"geomdp-plot: error: no run directories (eval.csv + config.yaml) under "
                          f"{', '.join(map(str, args.paths))}")
     groups = group_runs(runs, tuple(args.ignore))
+    renamed = rename_groups(groups, args.label)
+    paired = [renamed.get(b, b) for b in args.paired]
     references = []
     for ref in args.reference:
         value, _, name = ref.partition(":")
@@ -275,7 +301,7 @@ def main(argv: list[str] | None = None) -> None:
         plot(groups, args.out, args.title or default_title(args.paths), references)
     text = table(groups, args.threshold)
     if args.paired:
-        text += "\n\n" + paired_table(groups, args.paired)
+        text += "\n\n" + paired_table(groups, paired)
     if args.runs:
         text += "\n\n" + runs_table(groups)
     print(text)
