@@ -3,7 +3,8 @@
 TD-MPC makes one gradient update per agent step, so an agent step costs one
 ``plan`` (MPPI over the latent model) and one ``update`` (a batch of
 horizon-length slices). For the CPU preset (``configs/agent/tdmpc.yaml``) this
-measures both for the plain agent, D8 (PointMass2D) and icosahedral
+measures both for the plain agent, the plain agent on symmetry-augmented replay
+(``agent.augment=auto``: the cheap alternative to equivariant networks), D8 (PointMass2D) and icosahedral
 (PointMass3D) agents with both width strategies, the ``sqrt`` ones with their
 hidden layers dense (escnn's expanded matrix: the reference) and in the irrep
 basis (``FourierLinear``: the default), the continuous groups' agents (SO2, O2
@@ -43,6 +44,7 @@ ROOT = Path(__file__).resolve().parent.parent
 # (task, label, agent overrides) in the order printed; the first of a task is its plain agent.
 CONFIGS = [
     ("pointmass2d", "plain", ["agent.group=none"]),
+    ("pointmass2d", "plain augmented", ["agent.group=none", "agent.augment=auto"]),
     ("pointmass2d", "D8 linear", ["agent.group=D8", "agent.width_strategy=linear"]),
     ("pointmass2d", "D8 sqrt (irrep basis)", ["agent.group=D8", "agent.width_strategy=sqrt",
                                               "agent.networks.layers=fourier"]),
@@ -57,6 +59,7 @@ CONFIGS = [
     ("pointmass2d", "O2 sqrt", ["agent.group=O2", "agent.width_strategy=sqrt",
                                 "agent.allow_approximate=true"]),
     ("pointmass3d", "plain", ["agent.group=none"]),
+    ("pointmass3d", "plain augmented", ["agent.group=none", "agent.augment=auto"]),
     ("pointmass3d", "icosahedral linear", ["agent.group=icosahedral", "agent.width_strategy=linear"]),
     ("pointmass3d", "icosahedral sqrt (irrep basis)", ["agent.group=icosahedral",
                                                        "agent.width_strategy=sqrt",
