@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
+from scipy import stats
 from test_train import TINY, TRAIN
 
 from agents.cli import plot
@@ -140,6 +141,41 @@ def test_plot_labels_rename_groups_everywhere(tmp_path, capsys):
                          ("group=none:group=D8", "already names a group")):
         with pytest.raises(SystemExit, match=message):
             plot.main([str(tmp_path), "--label", bad])
+
+
+def test_plot_contrasts_margins_of_two_experiments(tmp_path, capsys):
+    # D8's margin over plain, mean over evaluations: hard +500, +450, +400; easy +100, +50
+    for seed, (hard, easy) in enumerate([(500, 100), (450, 50), (400, None)], start=1):
+        for task, margin in (("hard", hard), ("easy", easy)):
+            if margin is None:
+                continue  # easy has 2 seeds: the margins are compared unpaired
+            write_run(tmp_path / f"{task}/none/{seed}", "none", seed, [0, 0])
+            write_run(tmp_path / f"{task}/D8/{seed}", "D8", seed, [0, 2 * margin])
+            for group in ("none", "D8"):
+                with (tmp_path / f"{task}/{group}/{seed}/config.yaml").open("a") as f:
+                    f.write(f"env:\n  difficulty: {task}\n")
+    labels = [f"--label=group={group}, difficulty={task}:{name} {task}" for task in ("hard", "easy")
+              for group, name in (("none", "plain"), ("D8", "D8"))]
+    plot.main([str(tmp_path), *labels,
+               "--contrast", "D8 hard", "plain hard", "D8 easy", "plain easy"])
+    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("| (D8"))
+    cells = [c.strip() for c in row.split("|")[1:-1]]
+    assert cells[:3] == ["(D8 hard − plain hard) − (D8 easy − plain easy)", "3, 2",
+                         "+450.0 [+400.0, +500.0]"]
+    assert cells[3].startswith("+75.0 [") and cells[4].startswith("+375.0 [")
+    low, high = (float(x) for x in cells[4].split("[")[1].rstrip("]").split(","))
+    assert 300 <= low <= 375 <= high <= 450
+    # scipy's Welch test on (500, 450, 400) vs (100, 50)
+    welch = stats.ttest_ind([500, 450, 400], [100, 50], equal_var=False).pvalue
+    assert cells[5] == plot.p_value(welch) and 0.001 < welch < 0.05
+    assert cells[6].startswith("+750.0 [")  # the final returns' margins are twice as large
+    with pytest.raises(SystemExit, match="--contrast 'D8 medium' is not a group"):
+        plot.main([str(tmp_path), *labels, "--contrast", "D8 hard", "plain hard", "D8 medium",
+                   "plain easy"])
+    with pytest.raises(SystemExit, match="at least 2 seeds"):
+        plot.main([str(tmp_path / "hard"), str(tmp_path / "easy/D8"),
+                   str(tmp_path / "easy/none/1"), *labels, "--contrast", "D8 hard",
+                   "plain hard", "D8 easy", "plain easy"])
 
 
 def test_plot_title_defaults_to_the_folder_the_runs_share(tmp_path):

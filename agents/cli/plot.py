@@ -13,7 +13,8 @@ with 95% CI, IQM), of each seed's mean return over its evaluations (the area
 under its curve: sample efficiency; compare runs of equal length) and of the
 environment steps each seed took to reach each ``--threshold``; with ``--paired GROUP``,
 every group against that one seed by seed (differences, bootstrap CI, paired t-test;
-repeat it to compare against several groups, each pair once);
+repeat it to compare against several groups, each pair once); with ``--contrast A B C D``,
+whether A's margin over B is larger than C's over D (e.g. the same agents on two tasks);
 with ``--runs``, one row per run: its evaluations, wall time and the invariants of a
 working TD learner (``agents.run.td_invariants``), failures named.
 """
@@ -151,34 +152,95 @@ def paired_table(groups: dict[str, list[Run]], baselines: list[str]) -> str:
             "difference (95% CI), p |", "|---|---|---|---|---|---|---|"]
     compared: set[frozenset[str]] = set()
     for baseline in baselines:
-        base = {r.options.get("seed"): r for r in groups[baseline]}
         for label, runs in groups.items():
             if label == baseline or frozenset((label, baseline)) in compared:
                 continue
             compared.add(frozenset((label, baseline)))
-            pairs = sorted((r.options.get("seed"), r, base[r.options.get("seed")]) for r in runs
-                           if r.options.get("seed") in base)
+            pairs = seed_pairs(runs, groups[baseline])
             if pairs:
                 rows.append(paired_row(f"{label} − {baseline}", pairs))
     return "\n".join(rows)
 
 
+def seed_pairs(runs: list[Run], baseline: list[Run]) -> list[tuple[object, Run, Run]]:
+    """(seed, run, baseline run) for every seed both have, by seed."""
+    base = {r.options.get("seed"): r for r in baseline}
+    return sorted(((r.options.get("seed"), r, base[r.options.get("seed")]) for r in runs
+                   if r.options.get("seed") in base), key=lambda t: str(t[0]).zfill(12))
+
+
+def differences(pairs: list[tuple[object, Run, Run]]) -> tuple[np.ndarray, np.ndarray]:
+    """Per seed: the differences of the mean return over all evaluations, and of the final return."""
+    return (np.array([a.returns.mean() - b.returns.mean() for _, a, b in pairs]),
+            np.array([a.returns[-1] - b.returns[-1] for _, a, b in pairs]))
+
+
+def p_value(p: float) -> str:
+    return f"{p:.3f}" if p >= 0.001 else f"{p:.1e}"  # never a bare 0.000
+
+
 def paired_row(comparison: str, pairs: list[tuple[object, Run, Run]]) -> str:
     """One row of ``paired_table``: ``pairs`` are (seed, run, baseline run)."""
-    area = np.array([a.returns.mean() - b.returns.mean() for _, a, b in pairs])
-    final = np.array([a.returns[-1] - b.returns[-1] for _, a, b in pairs])
+    area, final = differences(pairs)
 
-    def p_value(d: np.ndarray) -> str:
+    def t_test(d: np.ndarray) -> str:
         if len(d) < 2 or np.all(d == d[0]):
             return "–"
-        p = stats.ttest_1samp(d, 0.0).pvalue
-        return f"{p:.3f}" if p >= 0.001 else f"{p:.1e}"  # never a bare 0.000
+        return p_value(stats.ttest_1samp(d, 0.0).pvalue)
 
     per_seed = ", ".join(f"{seed}: {d:+.1f}" for (seed, _, _), d in zip(pairs, area))
     return (f"| {comparison} | {len(pairs)} | {per_seed} | "
             "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(area))
-            + f" | {p_value(area)} | {int((area > 0).sum())} of {len(pairs)} | "
-            + "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(final)) + f", {p_value(final)} |")
+            + f" | {t_test(area)} | {int((area > 0).sum())} of {len(pairs)} | "
+            + "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(final)) + f", {t_test(final)} |")
+
+
+def contrast_table(groups: dict[str, list[Run]], contrasts: list[list[str]]) -> str:
+    """``--contrast A B C D``: is A's margin over B larger than C's over D? E.g. D8 over
+    plain on Reacher hard against D8 over plain on easy. Each margin is paired by seed
+    within its own pair of groups; the two sets of per-seed margins come from different
+    experiments, so they are compared unpaired: the difference of their means with a 95%
+    bootstrap CI and Welch's t-test."""
+    rows = ["| contrast | seeds | first margin, mean return over all evaluations (95% CI) "
+            "| second margin (95% CI) | first − second (95% CI) | Welch t-test p "
+            "| final return: first − second (95% CI), p |", "|---|---|---|---|---|---|---|"]
+    for names in contrasts:
+        unknown = [n for n in names if n not in groups]
+        if unknown:
+            raise SystemExit(f"geomdp-plot: error: --contrast {unknown[0]!r} is not a group; "
+                             f"groups: {', '.join(groups)}")
+        first, second = (seed_pairs(groups[a], groups[b]) for a, b in (names[:2], names[2:]))
+        if len(first) < 2 or len(second) < 2:
+            raise SystemExit(f"geomdp-plot: error: --contrast {' '.join(map(repr, names))}: "
+                             "each margin needs at least 2 seeds that both of its groups have")
+        (area_1, final_1), (area_2, final_2) = differences(first), differences(second)
+        cells = [f"({names[0]} − {names[1]}) − ({names[2]} − {names[3]})",
+                 f"{len(first)}, {len(second)}",
+                 "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(area_1)),
+                 "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(area_2)),
+                 "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci_of_difference(area_1, area_2)),
+                 welch_p(area_1, area_2),
+                 "{:+.1f} [{:+.1f}, {:+.1f}], ".format(*mean_ci_of_difference(final_1, final_2))
+                 + welch_p(final_1, final_2)]
+        rows.append("| " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def mean_ci_of_difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
+    """mean(a) − mean(b) and its 95% bootstrap CI, a and b resampled independently."""
+    mean = float(np.mean(a) - np.mean(b))
+    if np.all(a == a[0]) and np.all(b == b[0]):
+        return mean, mean, mean
+    ci = stats.bootstrap((a, b), lambda x, y, axis: np.mean(x, axis) - np.mean(y, axis),
+                         confidence_level=0.95, n_resamples=2000, method="percentile",
+                         random_state=0).confidence_interval
+    return mean, float(ci.low), float(ci.high)
+
+
+def welch_p(a: np.ndarray, b: np.ndarray) -> str:
+    if np.var(a) == 0 and np.var(b) == 0:
+        return "–"
+    return p_value(stats.ttest_ind(a, b, equal_var=False).pvalue)
 
 
 def runs_table(groups: dict[str, list[Run]]) -> str:
@@ -283,6 +345,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--label", metavar="GROUP:NAME", action="append", default=[],
                         help="show a group under another name in the table and the plot "
                              "(e.g. 'group=none:plain'); repeatable")
+    parser.add_argument("--contrast", nargs=4, metavar=("GROUP", "BASELINE", "GROUP2", "BASELINE2"),
+                        action="append", default=[],
+                        help="is GROUP's margin over BASELINE (paired by seed) larger than "
+                             "GROUP2's over BASELINE2? e.g. D8 over plain on hard vs on easy; "
+                             "repeatable")
     parser.add_argument("--runs", action="store_true",
                         help="also list every run: evaluations, wall time, TD learner invariants")
     args = parser.parse_args(argv)
@@ -302,6 +369,9 @@ def main(argv: list[str] | None = None) -> None:
     text = table(groups, args.threshold)
     if args.paired:
         text += "\n\n" + paired_table(groups, paired)
+    if args.contrast:
+        text += "\n\n" + contrast_table(groups, [[renamed.get(n, n) for n in names]
+                                                  for names in args.contrast])
     if args.runs:
         text += "\n\n" + runs_table(groups)
     print(text)
