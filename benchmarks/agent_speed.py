@@ -172,6 +172,12 @@ def measure(tree: Path, task: str, overrides: list[str], threads: int, preset: s
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def picks(word: str, label: str) -> bool:
+    """``--only``: a whole label picks itself only (``plain`` is not ``plain augmented``)."""
+    labels = {lab for _, lab, _ in CONFIGS}
+    return word == label if word in labels else word in label
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--threads", type=int, default=1)
@@ -183,7 +189,8 @@ def main() -> None:
                         help="each configuration (and the baseline, alternating with this checkout) "
                              "measured this many times; medians reported")
     parser.add_argument("--only", nargs="*", default=None,
-                        help="measure only the agents whose label contains one of these words")
+                        help="measure only these agents: a word that is a whole label picks that "
+                             "label ('plain'), any other picks the labels containing it ('D8')")
     args = parser.parse_args()
     import torch
 
@@ -192,7 +199,7 @@ def main() -> None:
     # Every configuration once per round, rounds repeated: a change in the machine's load
     # hits all of them alike, and each row reports its median over the rounds.
     selected = [c for c in CONFIGS if c[1] == "plain"  # every ratio's denominator
-                or args.only is None or any(word in c[1] for word in args.only)]
+                or args.only is None or any(picks(word, c[1]) for word in args.only)]
     runs: dict[tuple[str, str], list[dict[str, float]]] = {(t, lab): [] for t, lab, _ in selected}
     for _ in range(args.rounds):
         for task, label, overrides in selected:
