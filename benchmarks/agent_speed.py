@@ -72,6 +72,7 @@ CONFIGS = [
     ("pointmass3d", "O3 linear", ["agent.group=O3", "agent.width_strategy=linear"]),
     ("pointmass3d", "O3 sqrt", ["agent.group=O3", "agent.width_strategy=sqrt"]),
 ]
+LABELS = {label for _, label, _ in CONFIGS}  # what --only can name whole
 
 # Runs inside the measured checkout (its own agents package), with only the APIs
 # that every version of it has; prints one JSON line.
@@ -174,8 +175,7 @@ def measure(tree: Path, task: str, overrides: list[str], threads: int, preset: s
 
 def picks(word: str, label: str) -> bool:
     """``--only``: a whole label picks itself only (``plain`` is not ``plain augmented``)."""
-    labels = {lab for _, lab, _ in CONFIGS}
-    return word == label if word in labels else word in label
+    return word == label if word in LABELS else word in label
 
 
 def main() -> None:

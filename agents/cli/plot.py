@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -82,14 +83,39 @@ def group_runs(runs: list[Run], ignored: tuple[str, ...] = ()) -> dict[str, list
     return groups
 
 
+def bootstrap_ci(samples: tuple[np.ndarray, ...],
+                 statistic: Callable[..., np.ndarray]) -> tuple[float, float]:
+    """95% percentile bootstrap CI of ``statistic`` (each sample resampled on its own;
+    fixed seed, so that tables are reproducible)."""
+    ci = stats.bootstrap(samples, statistic, confidence_level=0.95, n_resamples=2000,
+                         method="percentile", random_state=0).confidence_interval
+    return float(ci.low), float(ci.high)
+
+
 def mean_ci(values: np.ndarray) -> tuple[float, float, float]:
     """Mean and 95% bootstrap confidence interval (the mean itself when n < 2)."""
     mean = float(np.mean(values))
     if len(values) < 2 or np.all(values == values[0]):
         return mean, mean, mean
-    ci = stats.bootstrap((values,), np.mean, confidence_level=0.95, n_resamples=2000,
-                         method="percentile", random_state=0).confidence_interval
-    return mean, float(ci.low), float(ci.high)
+    return mean, *bootstrap_ci((values,), np.mean)
+
+
+def signed(mean_low_high: tuple[float, float, float]) -> str:
+    """A difference with its CI, as the paired tables print it: ``+12.3 [-4.5, +20.1]``."""
+    return "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_low_high)
+
+
+def seed_order(seed: object) -> str:
+    """Sort key: seeds in numeric order (2 before 10) whether they are ints or strings."""
+    return str(seed).zfill(12)
+
+
+def require_groups(option: str, names: list[str], groups: dict[str, list[Run]]) -> None:
+    """A one-line error for an option naming a group that is not in the table."""
+    unknown = [n for n in names if n not in groups]
+    if unknown:
+        raise SystemExit(f"geomdp-plot: error: {option} {unknown[0]!r} is not a group; groups: "
+                         f"{', '.join(groups)}")
 
 
 def curve(runs: list[Run]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -143,10 +169,7 @@ def paired_table(groups: dict[str, list[Run]], baselines: list[str]) -> str:
     under the curve) and of the final return, their mean with a 95% bootstrap CI, a
     paired t-test and on how many seeds the group did better. Only seeds both groups have
     count; a pair already compared (the other way round) is not repeated."""
-    unknown = [b for b in baselines if b not in groups]
-    if unknown:
-        raise SystemExit(f"geomdp-plot: error: --paired {unknown[0]!r} is not a group; groups: "
-                         f"{', '.join(groups)}")
+    require_groups("--paired", baselines, groups)
     rows = ["| comparison | seeds | per-seed difference, mean return over all evaluations "
             "| mean difference (95% CI) | paired t-test p | better on | final return: mean "
             "difference (95% CI), p |", "|---|---|---|---|---|---|---|"]
@@ -166,7 +189,7 @@ def seed_pairs(runs: list[Run], baseline: list[Run]) -> list[tuple[object, Run, 
     """(seed, run, baseline run) for every seed both have, by seed."""
     base = {r.options.get("seed"): r for r in baseline}
     return sorted(((r.options.get("seed"), r, base[r.options.get("seed")]) for r in runs
-                   if r.options.get("seed") in base), key=lambda t: str(t[0]).zfill(12))
+                   if r.options.get("seed") in base), key=lambda t: seed_order(t[0]))
 
 
 def differences(pairs: list[tuple[object, Run, Run]]) -> tuple[np.ndarray, np.ndarray]:
@@ -182,17 +205,17 @@ def p_value(p: float) -> str:
 def paired_row(comparison: str, pairs: list[tuple[object, Run, Run]]) -> str:
     """One row of ``paired_table``: ``pairs`` are (seed, run, baseline run)."""
     area, final = differences(pairs)
-
-    def t_test(d: np.ndarray) -> str:
-        if len(d) < 2 or np.all(d == d[0]):
-            return "–"
-        return p_value(stats.ttest_1samp(d, 0.0).pvalue)
-
     per_seed = ", ".join(f"{seed}: {d:+.1f}" for (seed, _, _), d in zip(pairs, area))
-    return (f"| {comparison} | {len(pairs)} | {per_seed} | "
-            "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(area))
-            + f" | {t_test(area)} | {int((area > 0).sum())} of {len(pairs)} | "
-            + "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(final)) + f", {t_test(final)} |")
+    return (f"| {comparison} | {len(pairs)} | {per_seed} | {signed(mean_ci(area))} | "
+            f"{paired_p(area)} | {int((area > 0).sum())} of {len(pairs)} | "
+            f"{signed(mean_ci(final))}, {paired_p(final)} |")
+
+
+def paired_p(d: np.ndarray) -> str:
+    """Paired t-test of per-seed differences against 0 (– where it is undefined)."""
+    if len(d) < 2 or np.all(d == d[0]):
+        return "–"
+    return p_value(stats.ttest_1samp(d, 0.0).pvalue)
 
 
 def contrast_table(groups: dict[str, list[Run]], contrasts: list[list[str]]) -> str:
@@ -205,10 +228,7 @@ def contrast_table(groups: dict[str, list[Run]], contrasts: list[list[str]]) -> 
             "| second margin (95% CI) | first − second (95% CI) | Welch t-test p "
             "| final return: first − second (95% CI), p |", "|---|---|---|---|---|---|---|"]
     for names in contrasts:
-        unknown = [n for n in names if n not in groups]
-        if unknown:
-            raise SystemExit(f"geomdp-plot: error: --contrast {unknown[0]!r} is not a group; "
-                             f"groups: {', '.join(groups)}")
+        require_groups("--contrast", names, groups)
         first, second = (seed_pairs(groups[a], groups[b]) for a, b in (names[:2], names[2:]))
         if len(first) < 2 or len(second) < 2:
             raise SystemExit(f"geomdp-plot: error: --contrast {' '.join(map(repr, names))}: "
@@ -216,12 +236,9 @@ def contrast_table(groups: dict[str, list[Run]], contrasts: list[list[str]]) -> 
         (area_1, final_1), (area_2, final_2) = differences(first), differences(second)
         cells = [f"({names[0]} − {names[1]}) − ({names[2]} − {names[3]})",
                  f"{len(first)}, {len(second)}",
-                 "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(area_1)),
-                 "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci(area_2)),
-                 "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_ci_of_difference(area_1, area_2)),
-                 welch_p(area_1, area_2),
-                 "{:+.1f} [{:+.1f}, {:+.1f}], ".format(*mean_ci_of_difference(final_1, final_2))
-                 + welch_p(final_1, final_2)]
+                 signed(mean_ci(area_1)), signed(mean_ci(area_2)),
+                 signed(mean_ci_of_difference(area_1, area_2)), welch_p(area_1, area_2),
+                 f"{signed(mean_ci_of_difference(final_1, final_2))}, {welch_p(final_1, final_2)}"]
         rows.append("| " + " | ".join(cells) + " |")
     return "\n".join(rows)
 
@@ -231,10 +248,7 @@ def mean_ci_of_difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float, f
     mean = float(np.mean(a) - np.mean(b))
     if np.all(a == a[0]) and np.all(b == b[0]):
         return mean, mean, mean
-    ci = stats.bootstrap((a, b), lambda x, y, axis: np.mean(x, axis) - np.mean(y, axis),
-                         confidence_level=0.95, n_resamples=2000, method="percentile",
-                         random_state=0).confidence_interval
-    return mean, float(ci.low), float(ci.high)
+    return mean, *bootstrap_ci((a, b), lambda x, y, axis: np.mean(x, axis) - np.mean(y, axis))
 
 
 def welch_p(a: np.ndarray, b: np.ndarray) -> str:
@@ -250,7 +264,7 @@ def runs_table(groups: dict[str, list[Run]]) -> str:
     rows = ["| group | seed | evaluation returns | wall time (min; evaluation share) | Q half-way → end "
             "| target_lag, second half (end) | TD invariants |", "|---|---|---|---|---|---|---|"]
     for label, runs in groups.items():
-        for run in sorted(runs, key=lambda r: str(r.options.get("seed")).zfill(12)):
+        for run in sorted(runs, key=lambda r: seed_order(r.options.get("seed"))):
             returns = " ".join(f"{r:.0f}" if abs(r) >= 10 or r == 0 else f"{r:.1f}" for r in run.returns)
             minutes, share = wall_minutes(run.path), evaluation_share(run.path)
             wall = "–" if minutes is None else f"{minutes:.0f}"
@@ -305,9 +319,7 @@ def rename_groups(groups: dict[str, list[Run]], labels: list[str]) -> dict[str, 
         if not sep or not new:
             raise SystemExit(f"geomdp-plot: error: --label {spec!r} is not GROUP:NAME "
                              "(e.g. 'group=none:plain')")
-        if old not in groups:
-            raise SystemExit(f"geomdp-plot: error: --label {old!r} is not a group; groups: "
-                             f"{', '.join(groups)}")
+        require_groups("--label", [old], groups)
         if new in groups or new in renamed.values():
             raise SystemExit(f"geomdp-plot: error: --label {spec!r}: {new!r} already names a group")
         renamed[old] = new
