@@ -88,15 +88,26 @@ def losses(group, batch, sym):
                       if k in ("loss_model", "loss_pi", "consistency", "value_error")}
 
 
-def test_an_exactly_equivariant_agent_does_not_see_the_move_and_a_plain_one_does():
-    _, sym, _, batch = slices("GeoMDP/PointMass2D-v0")
-    moved = SliceAugmentation("auto", sym, seed=1)(batch)  # D4, PointMass2D's exact group
-    equivariant = losses("D4", batch, sym)
+@pytest.mark.parametrize("env_id, kwargs, group", [
+    ("GeoMDP/PointMass2D-v0", {}, "D4"),  # the exact group: vectors moved in the box
+    ("GeoMDP/Reacher-v0", {"difficulty": "hard"}, "D8"),  # sign fields (sin q2, torques)
+    ("GeoMDP/PointMass3D-v0", {"n_balls": 2}, "octahedral"),  # one element moves every ball
+])
+def test_an_exactly_equivariant_agent_does_not_see_the_move_and_a_plain_one_does(env_id, kwargs,
+                                                                                   group):
+    _, sym, _, batch = slices(env_id, **kwargs)
+    moved = SliceAugmentation(group, sym, seed=1)(batch)
+    assert not torch.allclose(moved["action"], batch["action"])
+    # escnn keeps its bases in float32: exact for D4 and the octahedral group (entries 0,
+    # ±1), ~1e-9 relative in float64 for D8's 45-degree rotations. A plain agent's losses
+    # move by 1e-2 or more.
+    equivariant = losses(group, batch, sym)
     for k, v in equivariant(batch).items():
-        assert equivariant(moved)[k] == pytest.approx(v, rel=1e-9, abs=1e-12), k
+        assert equivariant(moved)[k] == pytest.approx(v, rel=1e-7, abs=1e-12), k
     plain = losses("none", batch, sym)
     before, after = plain(batch), plain(moved)
-    assert abs(after["loss_model"] - before["loss_model"]) > 1e-6 * abs(before["loss_model"])
+    for k in ("loss_model", "value_error"):
+        assert abs(after[k] - before[k]) > 1e-3 * abs(before[k]), k
 
 
 def test_augmentation_options_are_checked():
