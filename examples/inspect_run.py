@@ -1,11 +1,17 @@
-"""Replay a trained run's agent from its checkpoint and show where episodes end.
+"""Replay a trained run's agent from its checkpoint: where episodes end, and whether Q is right.
 
-    python examples/inspect_run.py results/pointmass2d_cpu/D8/seed2 [--episodes 4] [--video out.mp4]
+    python examples/inspect_run.py results/pointmass2d_cpu/D8/seed2 [--episodes 4] [--policy] [--video a.mp4]
 
 Prints, per episode, the first two observation coordinates at the start and
 at the end (for PointMass2D: the mass's position) and the return, with the
-planner in evaluation mode (no exploration noise). ``--video`` writes the
-first episode as an MP4 (rendered headless).
+planner in evaluation mode (no exploration noise), or with the learned policy
+alone (``--policy``). Then the agent's value estimate against what it got:
+Q(s, pi(s)) at the first state, and averaged over the episode's states, beside
+the discounted return from there (``bootstrapped_returns``: rewards per agent
+step, the state after the time limit valued at the agent's own Q, as its TD
+targets do). A Q far above the return where the episode earned nothing is
+value overestimation, not a model the planner could trust. ``--video`` writes
+the first episode as an MP4 (rendered headless).
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ from omegaconf import OmegaConf
 from agents.run import checkpoint
 from agents.run.config import RunOptions
 from agents.run.envs import make_gym_env
+from agents.run.td_invariants import bootstrapped_returns
 from agents.run.video import frames_per_second, write_video
 from agents.tdmpc.agent import TDMPCAgent
 from agents.tdmpc.replay import make_replay_buffer
@@ -31,6 +38,8 @@ def main() -> None:
     parser.add_argument("run_dir", type=Path)
     parser.add_argument("--episodes", type=int, default=4)
     parser.add_argument("--seed", type=int, default=500)
+    parser.add_argument("--policy", action="store_true",
+                        help="act with the learned policy's mean action instead of planning")
     parser.add_argument("--video", type=Path, default=None, help="write the first episode to this MP4")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -45,28 +54,36 @@ def main() -> None:
     if state is None:
         raise SystemExit(f"no checkpoint in {args.run_dir}")
     print(f"{args.run_dir}: agent at env step {state['env_step']}")
+    discount = agent_cfg.loss.discount
     for episode in range(args.episodes):
         obs, _ = env.reset(seed=args.seed + episode)
-        start, total, done = obs[:2].copy(), 0.0, False
+        start, done, terminated = obs[:2].copy(), False, False
+        values, rewards = [], []  # per agent step
         frames = [] if args.video and episode == 0 else None
         agent.planner.reset()
         while not done:
             if frames is not None:
                 frames.append(env.render())
-            action = agent.act(torch.as_tensor(obs), state["agent_step"], explore=False).numpy()
+            obs_t = torch.as_tensor(obs)
+            values.append(float(agent.value(obs_t)))
+            action = (agent.policy_action(obs_t) if args.policy
+                      else agent.act(obs_t, state["agent_step"], explore=False)).numpy()
+            rewards.append(0.0)
             for _ in range(options.env.action_repeat):
                 obs, reward, terminated, truncated, _ = env.step(action)
-                total += reward
+                rewards[-1] += reward
                 done = terminated or truncated
                 if done:
                     break
+        final_value = 0.0 if terminated else float(agent.value(torch.as_tensor(obs)))
+        returns = bootstrapped_returns(rewards, discount, final_value)
         print(f"episode {episode}: start {np.round(start, 3)} end {np.round(obs[:2], 3)} "
-              f"return {total:.1f}")
+              f"return {sum(rewards):.1f}; Q(s_0, pi) {values[0]:.1f} vs discounted return "
+              f"{returns[0]:.1f}, mean over the episode {np.mean(values):.1f} vs {np.mean(returns):.1f}")
         if frames is not None:
             frames.append(env.render())
             fps = frames_per_second(env, options.env.action_repeat)
             print(f"video: {write_video(args.video, frames, fps)} ({len(frames)} frames)")
-
 
 if __name__ == "__main__":
     main()

@@ -13,7 +13,7 @@ from test_train import TINY, TRAIN
 from agents.cli import plot
 from agents.cli.train import CONFIG_DIR
 from agents.run.run_tables import evaluation_share, wall_minutes
-from agents.run.td_invariants import td_invariants
+from agents.run.td_invariants import bootstrapped_returns, td_invariants
 
 EXPERIMENTS = sorted(p.stem for p in (CONFIG_DIR / "experiment").glob("*.yaml"))
 
@@ -198,6 +198,14 @@ def write_train_log(path: Path, q: list[float], lag: list[float], reward: list[f
     lines += [f"{1000 * (i + 2)},{60.0 * (i + 2)},{qi},{li},{ri}"
               for i, (qi, li, ri) in enumerate(zip(q, lag, reward[1:]))]
     (path / "train.csv").write_text("\n".join(lines) + "\n")
+
+
+def test_bootstrapped_returns_are_what_q_estimates_along_an_episode():
+    assert bootstrapped_returns([1.0, 0.0, 2.0], 0.5, final_value=4.0) == [2.0, 2.0, 4.0]
+    assert bootstrapped_returns([1.0, 0.0, 2.0], 0.5) == [1.5, 1.0, 2.0]  # after a termination
+    # the TD fixed point of a constant reward is a fixed point of the returns too
+    np.testing.assert_allclose(bootstrapped_returns([3.0] * 50, 0.99, 300.0), [300.0] * 50)
+    assert bootstrapped_returns([], 0.99, 7.0) == []
 
 
 def test_td_invariants_name_each_way_value_learning_breaks(tmp_path):

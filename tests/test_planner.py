@@ -72,7 +72,7 @@ def plan_twice(agent, obs, noise):
             for o in obs]
 
 
-@pytest.mark.parametrize("env_id, kwargs, group, element", [
+EQUIVARIANT_CASES = pytest.mark.parametrize("env_id, kwargs, group, element", [
     ("GeoMDP/PointMass2D-v0", {}, "D8", groups.rotation_2d(3 * np.pi / 4) @ np.diag([1.0, -1])),
     ("GeoMDP/Reacher-v0", {}, "D4", np.diag([1.0, -1])),
     ("GeoMDP/PointMass3D-v0", {"n_balls": 2}, "octahedral", None),
@@ -80,10 +80,18 @@ def plan_twice(agent, obs, noise):
     ("Reacher-v5", {}, "D8", groups.rotation_2d(np.pi / 4) @ np.diag([1.0, -1])),
     ("InvertedPendulum-v5", {}, "D1", np.diag([1.0, -1])),
 ])
+
+
+def _element(agent, element):
+    """The given group element, or the 8th of the agent's group (3D groups)."""
+    return element if element is not None else agent.networks.group.element_matrix(
+        agent.networks.group.elements()[7])
+
+
+@EQUIVARIANT_CASES
 def test_planner_is_equivariant(env_id, kwargs, group, element, make_agent):
     env, sym, agent = make_agent(env_id, kwargs, group)
-    g = element if element is not None else agent.networks.group.element_matrix(
-        agent.networks.group.elements()[7])
+    g = _element(agent, element)
     obs = [torch.as_tensor(env.reset(seed=s)[0], dtype=torch.float64) for s in (0, 1)]
     recording = RecordingNoise(seed=0)
     actions = plan_twice(agent, obs, recording)
@@ -104,3 +112,31 @@ def test_plain_planner_is_not_equivariant(make_agent):
     moved = [torch.as_tensor(sym.transform_observation(o.numpy(), g)) for o in obs]
     b = plan_twice(agent, moved, TransformedNoise(recording, sym.action_matrix(g)))[0]
     assert np.abs(b.numpy() - sym.transform_action(a.numpy(), g)).max() > 1e-3
+
+
+@EQUIVARIANT_CASES
+def test_value_is_invariant_and_policy_action_equivariant(env_id, kwargs, group, element,
+                                                         make_agent):
+    """What inspect_run compares with the returns: V(g.s) = V(s), pi(g.s) = g.pi(s); and V
+    is the TD targets' min_i Q_i(z, pi(z))."""
+    env, sym, agent = make_agent(env_id, kwargs, group)
+    g = _element(agent, element)
+    obs = torch.as_tensor(np.stack([env.reset(seed=s)[0] for s in (0, 1, 2)]), dtype=torch.float64)
+    moved = torch.as_tensor(sym.transform_observation(obs.numpy(), g))
+    value, action = agent.value(obs), agent.policy_action(obs)
+    assert value.shape == (3,) and value.dtype == torch.float64
+    np.testing.assert_allclose(agent.value(moved).numpy(), value.numpy(), atol=1e-8)
+    np.testing.assert_allclose(agent.policy_action(moved).numpy(),
+                               sym.transform_action(action.numpy(), g), atol=1e-8)
+    z = agent.model.encode(obs)
+    q = agent.model.q(z, agent.model.pi(z))
+    assert q.shape[0] == agent.config.networks.num_q
+    np.testing.assert_allclose(value.numpy(), q.min(dim=0).values.squeeze(-1).detach().numpy())
+    assert (q.max(dim=0).values.squeeze(-1).detach() - value).abs().max() > 1e-6  # the min, not any
+
+
+def test_plain_value_is_not_invariant(make_agent):
+    env, sym, agent = make_agent("GeoMDP/PointMass2D-v0", {}, None)
+    obs = torch.as_tensor(env.reset(seed=0)[0], dtype=torch.float64)
+    moved = torch.as_tensor(sym.transform_observation(obs.numpy(), groups.rotation_2d(np.pi / 2)))
+    assert abs(float(agent.value(moved)) - float(agent.value(obs))) > 1e-4

@@ -1,12 +1,14 @@
 """Interruptions, damaged checkpoints and bad run directories: nothing lost, one clear line."""
 
 import json
+import re
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import imageio.v2 as imageio
+import numpy as np
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
@@ -155,6 +157,14 @@ def test_evaluation_video_is_written_and_playable(tmp_path):
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert sum(1 for _ in imageio.get_reader(tmp_path / "replay.mp4").iter_data()) == 126
+    # and compares the agent's value estimate with the return, planning or with pi alone
+    policy = subprocess.run([sys.executable, str(ROOT / "examples/inspect_run.py"), str(tmp_path),
+                             "--episodes", "1", "--policy"], capture_output=True, text=True, timeout=300)
+    assert policy.returncode == 0, policy.stderr
+    for printed in (out.stdout, policy.stdout):
+        values = re.search(r"Q\(s_0, pi\) (\S+) vs discounted return (\S+), mean over the "
+                           r"episode (\S+) vs (\S+)$", printed, re.MULTILINE)
+        assert values and all(np.isfinite(float(v)) for v in values.groups()), printed
 
 
 def test_sweep_directories_stay_short_and_the_launcher_uses_one_process_per_core():

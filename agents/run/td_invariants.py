@@ -16,6 +16,10 @@ every finished run (``geomdp-plot --runs``):
   must not learn negative values, nor a cost task positive ones);
 - with (almost) no reward in the whole run, Q stays near 0 (the fixed point of
   the TD backup on zero rewards) rather than drifting.
+
+A log cannot say whether Q is right where the agent actually goes; for that,
+``bootstrapped_returns`` gives the returns Q estimates along an episode played
+from a checkpoint (``examples/inspect_run.py`` prints the comparison).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from __future__ import annotations
 import csv
 import math
 import statistics
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,6 +56,21 @@ class TDInvariants:
     run_reward: float  # total |training episode reward| of the run
     failures: tuple[str, ...]
     notes: tuple[str, ...] = ()  # checks left unjudged, and why
+
+
+def bootstrapped_returns(rewards: Sequence[float], discount: float,
+                         final_value: float = 0.0) -> list[float]:
+    """G_t = r_t + discount * G_{t+1} with G_T = ``final_value``, for t < T = len(rewards).
+
+    What Q(s_t, pi(s_t)) estimates along a played episode: a learner that bootstraps
+    through time limits (TD-MPC) values the state after the last step at its own Q
+    (``final_value``), not at 0; pass 0 after a true termination.
+    """
+    returns, running = [], float(final_value)
+    for reward in reversed(rewards):
+        running = float(reward) + discount * running
+        returns.append(running)
+    return returns[::-1]
 
 
 def _floats(rows: list[dict[str, str]], column: str) -> list[float]:

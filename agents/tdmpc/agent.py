@@ -143,6 +143,24 @@ class TDMPCAgent:
                                      min_std=self.config.std_schedule(step), explore=explore,
                                      noise=self.noise)
 
+    def _as_model_input(self, obs: torch.Tensor) -> torch.Tensor:
+        return obs.to(self.device, next(self.model.parameters()).dtype)
+
+    @torch.no_grad()
+    def policy_action(self, obs: torch.Tensor) -> torch.Tensor:
+        """The learned policy's action for ``obs`` (its mean, no planning): what the
+        planner seeds part of its samples with, and what the TD targets bootstrap on."""
+        with expansion_scope(self.model):
+            return self.model.pi(self.model.encode(self._as_model_input(obs)))
+
+    @torch.no_grad()
+    def value(self, obs: torch.Tensor) -> torch.Tensor:
+        """The agent's estimate of the discounted return from ``obs``: min_i Q_i(z, pi(z)),
+        z = h(obs), the quantity its TD targets bootstrap on (``[...]`` for ``obs [..., n]``)."""
+        with expansion_scope(self.model):
+            z = self.model.encode(self._as_model_input(obs))
+            return self.model.q(z, self.model.pi(z)).min(dim=0).values.squeeze(-1)
+
     def update(self, batch: TensorDictBase) -> tuple[dict[str, float], torch.Tensor]:
         """One gradient step on a [batch, horizon] TensorDict. Returns the losses and
         health metrics, and each slice's new replay priority (TD-MPC's TD error). With
