@@ -4,8 +4,8 @@ TD-MPC makes one gradient update per agent step, so an agent step costs one
 ``plan`` (MPPI over the latent model) and one ``update`` (a batch of
 horizon-length slices). For the CPU preset (``configs/agent/tdmpc.yaml``) this
 measures both for the plain agent, the plain agent on symmetry-augmented replay
-(``agent.augment=auto``: the cheap alternative to equivariant networks), D8 (PointMass2D) and icosahedral
-(PointMass3D) agents with both width strategies, the ``sqrt`` ones with their
+(``agent.augment=auto``: the cheap alternative to equivariant networks), D8 (PointMass2D,
+Reacher hard) and icosahedral (PointMass3D) agents with both width strategies, the ``sqrt`` ones with their
 hidden layers dense (escnn's expanded matrix: the reference) and in the irrep
 basis (``FourierLinear``: the default), the continuous groups' agents (SO2, O2
 beside D8; SO3, O3 beside icosahedral; default band limit and grid), and prints
@@ -58,6 +58,10 @@ CONFIGS = [
                                   "agent.allow_approximate=true"]),
     ("pointmass2d", "O2 sqrt", ["agent.group=O2", "agent.width_strategy=sqrt",
                                 "agent.allow_approximate=true"]),
+    # Reacher hard: where augmentation (by all of O(2)) and D8 differ in sample efficiency
+    ("reacher", "plain", ["env.difficulty=hard", "agent.group=none"]),
+    ("reacher", "plain augmented", ["env.difficulty=hard", "agent.group=none", "agent.augment=auto"]),
+    ("reacher", "D8 linear", ["env.difficulty=hard", "agent.group=D8", "agent.width_strategy=linear"]),
     ("pointmass3d", "plain", ["agent.group=none"]),
     ("pointmass3d", "plain augmented", ["agent.group=none", "agent.augment=auto"]),
     ("pointmass3d", "icosahedral linear", ["agent.group=icosahedral", "agent.width_strategy=linear"]),
