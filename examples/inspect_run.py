@@ -85,5 +85,6 @@ def main() -> None:
             fps = frames_per_second(env, options.env.action_repeat)
             print(f"video: {write_video(args.video, frames, fps)} ({len(frames)} frames)")
 
+
 if __name__ == "__main__":
     main()

@@ -159,7 +159,7 @@ class TDMPCAgent:
         z = h(obs), the quantity its TD targets bootstrap on (``[...]`` for ``obs [..., n]``)."""
         with expansion_scope(self.model):
             z = self.model.encode(self._as_model_input(obs))
-            return self.model.q(z, self.model.pi(z)).min(dim=0).values.squeeze(-1)
+            return self.model.min_q(z, self.model.pi(z)).squeeze(-1)
 
     def update(self, batch: TensorDictBase) -> tuple[dict[str, float], torch.Tensor]:
         """One gradient step on a [batch, horizon] TensorDict. Returns the losses and

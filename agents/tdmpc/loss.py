@@ -92,7 +92,7 @@ class TDMPCLoss(LossModule):
             target_z = self.target_model.encode(next_obs)
             next_action = model.pi(z_next, cfg.policy_noise, torch.randn(
                 *z_next.shape[:-1], model.action_dim, dtype=z_next.dtype, device=z_next.device))
-            target_q = self.target_model.q(z_next, next_action).min(dim=0).values
+            target_q = self.target_model.min_q(z_next, next_action)
             td_target = reward + cfg.discount * not_done * target_q
 
         # The latent rollout is sequential; everything evaluated along it (Q, reward,
@@ -133,7 +133,7 @@ class TDMPCLoss(LossModule):
                             device=latents.device)
         action = self.model.pi(latents, self.config.policy_noise, noise)
         with detached_parameters(self._q_slots):
-            q = self.model.q(latents, action).min(dim=0).values.squeeze(-1)
+            q = self.model.min_q(latents, action).squeeze(-1)
         return -(q.mean(0) * self._rho(latents.shape[1], latents)).sum()
 
     def _rho(self, horizon: int, like: torch.Tensor) -> torch.Tensor:

@@ -96,7 +96,7 @@ class MPPIPlanner:
             discount *= self.config.discount
         terminal = self.model.pi(z, self.policy_noise,
                                  noise.normal((z.shape[0], self.model.action_dim), z))
-        return value + discount * self.model.q(z, terminal).min(dim=0).values
+        return value + discount * self.model.min_q(z, terminal)
 
     @torch.no_grad()
     def plan(self, obs: torch.Tensor, *, horizon: int, min_std: float, explore: bool,

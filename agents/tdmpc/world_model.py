@@ -45,6 +45,11 @@ class WorldModel(nn.Module):
         za = torch.cat([z, action], dim=-1)
         return torch.stack([q(za) for q in self.qs])
 
+    def min_q(self, z: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """The ensemble's pessimistic estimate min_i Q_i(z, action): [..., 1]. What TD-MPC's
+        TD targets, policy loss and planner's terminal value all use."""
+        return self.q(z, action).min(dim=0).values
+
     def pi(self, z: torch.Tensor, std: float = 0.0,
            noise: torch.Tensor | None = None) -> torch.Tensor:
         """The policy's action, plus ``std`` times ``noise`` (standard normal) if given.
