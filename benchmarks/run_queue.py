@@ -5,7 +5,9 @@ it), at most ``--parallel`` at a time with one torch thread each, before a deadl
 
 - a run starts only if its expected wall time fits before the deadline (expected from
   the finished runs of its group -- the folder above its seed folder -- or from
-  ``--estimate``);
+  ``--estimate``), except runs matching ``--carry-over``: longer than any session, they
+  start whenever ``--carry-over-minutes`` are left and advance from checkpoint to
+  checkpoint, one session after another, on a machine that keeps the worktree;
 - at the deadline, runs still going get SIGTERM: they stop at a safe point with their
   last checkpoint, and the next call of the same command resumes them on a machine
   that still has the checkpoints (a run that must start over says so in its
@@ -22,6 +24,8 @@ a comment. The same plan given again skips finished runs and resumes the others:
 
     python benchmarks/run_queue.py benchmarks/plans/headline.txt --commit 9623621 \\
         --deadline 20:45 --estimate 'results/reacher_hard_cpu/*=45'
+    python benchmarks/run_queue.py benchmarks/plans/baseline_fidelity_paper.txt \
+        --commit 1234abc --deadline 19:00 --parallel 1 --carry-over 'results/fidelity/*'
 
 ``--dry-run`` prints what would start now, and touches nothing (not even the worktree).
 """
@@ -313,13 +317,15 @@ class Queue:
                  deadline: dt.datetime, parallel: int = 2, estimates: list[tuple[str, float]] = (),
                  default_minutes: float = 60.0, python: str = sys.executable,
                  module: str | None = None, commit_results: bool = True,
-                 poll_seconds: float = 10.0, stop_grace_seconds: float = 120.0) -> None:
+                 poll_seconds: float = 10.0, stop_grace_seconds: float = 120.0,
+                 carry_over: list[str] = (), carry_over_minutes: float = 20.0) -> None:
         self.runs, self.repo, self.commit, self.worktree = runs, repo, commit, worktree
         self.deadline, self.parallel = deadline, parallel
         self.estimates, self.default_minutes = list(estimates), default_minutes
         self.module = module or trainer_module(repo, commit)
         self.python, self.commit_results = python, commit_results
         self.poll_seconds, self.stop_grace_seconds = poll_seconds, stop_grace_seconds
+        self.carry_over, self.carry_over_minutes = list(carry_over), carry_over_minutes
         for run in runs:
             run.work = worktree / run.dest
         self.running: dict[str, tuple[Run, subprocess.Popen | AdoptedProcess, dt.datetime]] = {}
@@ -336,12 +342,24 @@ class Queue:
         return [r for r in self.runs if r.dest not in self.running and r.dest not in self.failed
                 and not finished(r, self.repo)]
 
+    def carried_over(self, run: Run) -> bool:
+        """Whether ``run`` may start without fitting before the deadline (``--carry-over``)."""
+        return any(fnmatch.fnmatch(run.dest, p) or fnmatch.fnmatch(run.group, p)
+                   for p in self.carry_over)
+
+    def fits(self, run: Run, now: dt.datetime) -> bool:
+        """Whether starting ``run`` now is worth it: it finishes before the deadline or, carried
+        over, has ``carry_over_minutes`` to advance before the deadline's SIGTERM."""
+        if self.carried_over(run):
+            return self.minutes_left(now) >= self.carry_over_minutes
+        return self.remaining(run) <= self.minutes_left(now)
+
     def next_to_start(self, now: dt.datetime) -> Run | None:
-        """The first pending run, in plan order, whose expected time fits before the deadline."""
+        """The first pending run, in plan order, that fits (``fits``)."""
         for run in self.pending():
             if logged_step(run.work) >= run.steps:
                 continue  # finished here, waiting to be collected
-            if self.remaining(run) <= self.minutes_left(now):
+            if self.fits(run, now):
                 return run
         return None
 
@@ -498,6 +516,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--estimate", action="append", default=[], metavar="PATTERN=MINUTES",
                         help="minutes for runs whose path or group matches, until one has finished")
     parser.add_argument("--default-minutes", type=float, default=60.0)
+    parser.add_argument("--carry-over", action="append", default=[], metavar="PATTERN",
+                        help="runs whose path or group matches start even if they cannot finish "
+                             "before the deadline (stopped at it, resumed by the next call)")
+    parser.add_argument("--carry-over-minutes", type=float, default=20.0,
+                        help="a carried-over run starts only with this many minutes left")
     parser.add_argument("--python", default=sys.executable)
     parser.add_argument("--module", help=argparse.SUPPRESS)  # default: the commit's geomdp-train
     parser.add_argument("--no-commit", action="store_true", help="copy finished logs, do not commit")
@@ -510,7 +533,8 @@ def main(argv: list[str] | None = None) -> int:
         commit, worktree = pinned_worktree(REPO, args.commit, args.worktree, create=not args.dry_run)
         queue = Queue(runs, REPO, commit, worktree, parse_deadline(args.deadline, dt.datetime.now()),
                       args.parallel, parse_estimates(args.estimate), args.default_minutes,
-                      args.python, args.module, not args.no_commit, args.poll_seconds)
+                      args.python, args.module, not args.no_commit, args.poll_seconds,
+                      carry_over=args.carry_over, carry_over_minutes=args.carry_over_minutes)
     except (OSError, PlanError) as err:
         print(f"run_queue: error: {err}", file=sys.stderr)
         return 2
@@ -518,8 +542,9 @@ def main(argv: list[str] | None = None) -> int:
         f"{queue.deadline:%Y-%m-%d %H:%M}, {queue.parallel} at a time")
     if args.dry_run:
         for run in queue.pending():
-            fits = queue.remaining(run) <= queue.minutes_left(dt.datetime.now())
-            print(f"{queue.remaining(run):6.0f} min {'fits' if fits else 'late'}  {run.dest}  "
+            fits = queue.fits(run, dt.datetime.now())
+            word = ("carry" if queue.carried_over(run) else "fits") if fits else "late"
+            print(f"{queue.remaining(run):6.0f} min {word}  {run.dest}  "
                   f"{shlex.join(run.argv(args.python, queue.module))}")
         return 0
     return queue.run()

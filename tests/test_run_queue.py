@@ -124,6 +124,31 @@ def test_only_runs_that_fit_before_the_deadline_start(repo: Path) -> None:
     assert make_queue(repo, plan, minutes_left=1).next_to_start(now) is None
 
 
+def test_carried_over_runs_start_without_fitting_and_stop_at_the_deadline(repo: Path) -> None:
+    """A run longer than any session (--carry-over) starts when it cannot finish, advances
+    to its checkpoint before the deadline's SIGTERM, and the next call resumes it."""
+    plan = "results/x/long/seed1 400 delay=0.01\nresults/x/short/seed1 4\n"
+    estimates = rq.parse_estimates(["results/x/*=600"])
+    now = dt.datetime.now()
+    assert make_queue(repo, plan, 30, estimates=estimates).next_to_start(now) is None
+    queue = make_queue(repo, plan, 30, estimates=estimates, carry_over=["results/x/long"])
+    assert [queue.fits(r, now) for r in queue.runs] == [True, False]
+    assert queue.next_to_start(now).dest == "results/x/long/seed1"
+    # too close to the deadline for a carried-over run to advance: nothing starts
+    late = make_queue(repo, plan, 5, estimates=estimates, carry_over=["results/x/long"])
+    assert late.next_to_start(now) is None
+    queue.deadline = dt.datetime.now() + dt.timedelta(seconds=1.5)
+    queue.carry_over_minutes = 0.0  # the 1.5 s left are enough for this stand-in trainer
+    queue.run()
+    step = rq.checkpoint_step(queue.runs[0].work)
+    assert step is not None and 0 < step < 400
+    assert not (repo / "results/x/long/seed1").exists()  # unfinished: nothing collected
+    resumed = make_queue(repo, plan, 30, estimates=estimates, carry_over=["results/x/long"])
+    resumed.run()
+    assert rq.logged_step(repo / "results/x/long/seed1") == 400
+    assert "resuming from its checkpoint" in (queue.runs[0].work / "stdout.log").read_text()
+
+
 def test_queue_skips_finished_resumes_partial_and_commits_logs_only(repo: Path) -> None:
     plan = ("results/x/a/seed1 3 delay=0.01\n"   # finished earlier: skipped
             "results/x/a/seed2 6 delay=0.01\n"   # checkpoint at 3 on this machine: resumes
