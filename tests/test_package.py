@@ -4,6 +4,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 import agents
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -22,10 +24,11 @@ def test_every_export_resolves_to_its_module():
         raise AssertionError("an unknown name must raise AttributeError")
 
 
+@pytest.mark.slow
 def test_reading_runs_does_not_import_the_networks_libraries():
     """geomdp-plot and the run queue read CSVs: importing them must not load torch or escnn
     (seconds of start-up on every call)."""
-    code = ("import sys; sys.path.insert(0, 'benchmarks'); import agents.cli.plot, run_queue; "
+    code = ("import sys; sys.path.insert(0, 'scripts'); import agents.cli.plot, run_queue; "
             "print(sorted(m for m in ('torch', 'escnn', 'torchrl') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
                          check=True)

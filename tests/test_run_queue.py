@@ -16,8 +16,10 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # runs stand-in trainers as subprocesses
+
 SPEC = importlib.util.spec_from_file_location(
-    "run_queue", Path(__file__).resolve().parent.parent / "benchmarks" / "run_queue.py")
+    "run_queue", Path(__file__).resolve().parent.parent / "scripts" / "run_queue.py")
 rq = importlib.util.module_from_spec(SPEC)
 sys.modules["run_queue"] = rq
 SPEC.loader.exec_module(rq)
@@ -307,7 +309,7 @@ def test_every_plan_line_is_a_valid_run():
     from agents.cli.train import CONFIG_DIR
     from agents.run.config import RunOptions, check_task
 
-    plans = sorted((Path(__file__).resolve().parent.parent / "benchmarks" / "plans").glob("*.txt"))
+    plans = sorted((Path(__file__).resolve().parent.parent / "scripts" / "plans").glob("*.txt"))
     assert plans
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"), \
             warnings.catch_warnings():

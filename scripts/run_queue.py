@@ -22,9 +22,9 @@ it), at most ``--parallel`` at a time with one torch thread each, before a deadl
 A plan has one run per line, ``<results dir> <env steps> <override>...``; ``#`` starts
 a comment. The same plan given again skips finished runs and resumes the others::
 
-    python benchmarks/run_queue.py benchmarks/plans/headline.txt --commit 9623621 \\
+    python scripts/run_queue.py scripts/plans/headline.txt --commit 9623621 \\
         --deadline 20:45 --estimate 'results/reacher_hard_cpu/*=45'
-    python benchmarks/run_queue.py benchmarks/plans/baseline_fidelity_paper.txt \
+    python scripts/run_queue.py scripts/plans/baseline_fidelity_paper.txt \
         --commit 1234abc --deadline 19:00 --parallel 1 --carry-over 'results/fidelity/*'
 
 ``--dry-run`` prints what would start now, and touches nothing (not even the worktree).
