@@ -16,7 +16,7 @@ import gymnasium
 import yaml
 
 import geomdp_envs  # noqa: F401  (registers the built-in tasks)
-from geomdp_envs.check import check_symmetry
+from geomdp_envs.check import check_symmetry, declaration_table
 from geomdp_envs.declare import declare, shipped_declarations, symmetry_of
 
 
@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
         if symmetry is None:
             raise ValueError(f"{args.env_id} declares no symmetry: give a declaration "
                              f"(a YAML file, or one of {', '.join(shipped_declarations())})")
-        print(symmetry.describe())
+        print(declaration_table(env))
         failed = False
         for group in args.group or [symmetry.exact_group]:
             report = check_symmetry(env, group=group, n_trials=args.trials, n_steps=args.steps,

@@ -5,7 +5,11 @@ orthogonal d x d matrix, so a declaration written for O(d) can be evaluated on
 any element without a group library. Names:
 
 * planar: ``O(2)``, ``SO(2)``, ``C<N>`` (rotations by 2*pi*k/N), ``D<N>`` (``C<N>``
-  plus the reflection y -> -y, the convention escnn uses);
+  plus the reflection y -> -y, ``diag(1, -1)``, the convention escnn uses, and its
+  products with the rotations: the reflections across the lines at angles pi*k/N).
+  So ``D1`` is {I, y -> -y}, and x -> -x lies in ``D<N>`` for even N only. ``sign``
+  fields see only det g = -1, the same for every reflection; the axis matters for
+  ``vector`` fields;
 * spatial: ``O(3)``, ``SO(3)``, ``octahedral`` (the cube's 24 rotations),
   ``full_octahedral`` (48, all signed permutations), ``icosahedral`` (60
   rotations), ``full_icosahedral`` (120, with the inversion -I).

@@ -9,7 +9,8 @@ rep             rho(g)               examples
 ==============  ===================  ==========================================
 ``trivial``     1                    distances, cos of a relative joint angle
 ``sign``        det(g)               joint angles/velocities/torques about the
-                                     plane's normal (planar pseudo-scalars)
+                                     plane's normal (planar pseudo-scalars); a
+                                     raw absolute angle under D1 (y -> -y) only
 ``vector``      g                    positions, velocities, forces
 ``pseudovector`` det(g) g            angular velocity and torque in 3D
 ==============  ===================  ==========================================

@@ -1,9 +1,24 @@
+from pathlib import Path
+
 import gymnasium
 import numpy as np
 import pytest
 from conftest import TASK_CONFIGS
 
-from geomdp_envs import check_symmetry, groups
+from geomdp_envs import check_symmetry, declare, groups, load_declaration
+from geomdp_envs.check import declaration_table
+
+SWIMMER = Path(__file__).resolve().parents[1] / "examples" / "swimmer_v5.yaml"
+
+
+def reacher_v5(kind, name, **change):
+    """Gymnasium's Reacher-v5 under the shipped declaration with one field changed: ``kind``
+    is observation, action, state.qpos or state.qvel."""
+    data = load_declaration("reacher_v5").to_dict()
+    fields = data["state"][kind[len("state."):]] if kind.startswith("state.") else data[kind]
+    (entry,) = [f for f in fields if f["name"] == name]
+    entry.update(change)
+    return declare(gymnasium.make("Reacher-v5"), data)
 
 
 @pytest.mark.parametrize("config", TASK_CONFIGS)
@@ -35,6 +50,8 @@ def test_pointmass2d_reports_the_violation_of_a_45_degree_rotation_near_a_wall()
     assert not report.passed
     assert report.max_next_observation_error > 1e-2  # a wall stops one trajectory, not the other
     assert report.max_observation_error < 1e-12  # the declaration itself is right
+    # the rerun with zero actions (fixed by every g) still disagrees: not the action declaration
+    assert "even with zero actions (which every g fixes): not the action declaration" in str(report)
     # Away from the walls the same rotation is a symmetry: states near the origin
     # with small velocities do not reach a wall in three steps.
     base = env.unwrapped
@@ -84,3 +101,65 @@ def test_check_restores_the_simulator_state_and_rejects_foreign_groups():
         check_symmetry(env, group="icosahedral")
     with pytest.raises(TypeError, match="declares no symmetry"):
         check_symmetry(gymnasium.make("Pendulum-v1"))
+
+
+def test_the_report_shows_the_env_indices_of_swapped_components():
+    # (sin q1, cos q1) instead of (cos q1, sin q1): the declared slice [0:2] looks the same
+    env = reacher_v5("observation", "upper_arm_direction", index=[2, 0])
+    report = check_symmetry(env, n_trials=8)
+    assert report.failing_fields == ["upper_arm_direction"]
+    assert "fields over tolerance: upper_arm_direction obs[2,0] " in str(report)
+    assert "the likely cause is the observation declaration" in str(report)
+    table = declaration_table(env)
+    assert "| observation | [0:2] | upper_arm_direction | vector | obs[2,0] |" in table
+    assert "| action | [1:2] | elbow_torque | sign | act[1] |" in table
+    # a built-in task's fields are where its declaration says
+    assert "velocity obs[2,3]" not in str(check_symmetry(gymnasium.make("GeoMDP/PointMass2D-v0"),
+                                                          n_trials=4))
+    assert "| observation | [2:4] | velocity | vector | obs[2,3] |" in declaration_table(
+        gymnasium.make("GeoMDP/PointMass2D-v0"))
+
+
+def test_a_wrong_action_field_is_named_by_the_hint():
+    report = check_symmetry(reacher_v5("action", "shoulder_torque", rep="trivial"),
+                            n_trials=8)
+    assert report.max_observation_error < 1e-12 < 1e-2 < report.max_next_observation_error
+    assert ("with zero actions (which every g fixes) they do: the likely cause is the action "
+            "declaration, fields shoulder_torque act[0] trivial, elbow_torque act[1] sign"
+            ) in str(report)
+    assert "state declaration" not in str(report)
+
+
+def test_a_wrong_state_field_points_to_the_state_declaration():
+    # the observation declaration is right; qvel's shoulder velocity is declared invariant
+    report = check_symmetry(reacher_v5("state.qvel", "shoulder_velocity", rep="trivial"),
+                            n_trials=8)
+    assert not report.passed and report.failing_fields[0] == "shoulder_velocity"
+    assert "shoulder_velocity obs[6] " in str(report)
+    assert ("g.s does not step and is not rewarded like g applied to the run from s (zero actions, "
+            "compared without rho_S): the likely cause is the state declaration") in str(report)
+    # an orientation declared a sign only shows in the reward: the arm and the target move apart
+    report = check_symmetry(reacher_v5("state.qpos", "shoulder", rep="sign"),
+                            group="SO(2)", n_trials=8)
+    assert "g.s steps but is not rewarded like g applied" in str(report)
+    assert "either the state declaration" in str(report)
+
+
+def test_the_swimmer_example_is_exact_under_d1_only():
+    """examples/swimmer_v5.yaml: raw angles are sign fields under D1's reflection y -> -y."""
+    declaration = load_declaration(str(SWIMMER))
+    assert (declaration.dim, declaration.exact_group) == (2, "D1")
+    assert {f.name: f.rep for f in declaration.observation}["torso_angle"] == "sign"
+    env = declare(gymnasium.make("Swimmer-v5"), declaration)
+    report = check_symmetry(env, n_trials=8)
+    assert report.group == "D1" and report.passed and report.max_error < 1e-12, str(report)
+    # rotations add to the raw torso angle, and the reward (x velocity) is not invariant
+    report = check_symmetry(env, group="O(2)", n_trials=8)
+    assert report.failing_fields == ["torso_angle"] and report.max_reward_error > 1e-2
+    assert "or g is no symmetry of the reward" in str(report)
+    # the raw angle declared invariant ("an angle is a scalar") is caught and named
+    data = declaration.to_dict()
+    data["observation"][0]["rep"] = "trivial"
+    report = check_symmetry(declare(gymnasium.make("Swimmer-v5"), data), n_trials=8)
+    assert report.failing_fields == ["torso_angle"] and "torso_angle obs[0] " in str(report)
+    assert "the likely cause is the observation declaration" in str(report)

@@ -2,7 +2,9 @@
 private internal it wraps, and that internal still means what the project relies on.
 
 A failure names the dependency, its installed version and what changed: the fix
-belongs in ``agents/compat/<dependency>.py``, nowhere else.
+belongs in ``agents/compat/<dependency>.py`` (gymnasium's: ``geomdp_envs/compat.py``),
+nowhere else. Also here: public APIs that replaced a private one, checked to give
+bit-identical numbers (``target_lag``).
 """
 
 import contextlib
@@ -11,6 +13,7 @@ import warnings
 from collections import Counter
 from importlib.metadata import version
 
+import gymnasium
 import numpy as np
 import pytest
 import torch
@@ -24,8 +27,11 @@ from torchrl.objectives import LossModule, SoftUpdate
 
 from agents.compat.escnn import (
     BASIS_EXPANSION,
+    LINEAR_BUFFERS,
     basis_blocks,
+    bias_expansion,
     is_basis_expansion_key,
+    is_linear_buffer,
     own_basis_expansion,
 )
 from agents.compat.torch import ConversionHook, TorchDispatchMode, child_modules, parameter_table
@@ -34,6 +40,7 @@ from agents.compat.torchrl import (
     priority_state,
     restore_priority_state,
 )
+from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig, rebuilt_with_networks
 from agents.tdmpc.replay import (
     ReplayConfig,
     load_replay,
@@ -41,11 +48,15 @@ from agents.tdmpc.replay import (
     save_replay,
     update_priorities,
 )
+from geomdp_envs.compat import can_observe, observe, random_state, restore_random_state
+
+# geomdp_envs does not import agents, so gymnasium's adapter is its own
+ADAPTERS = {"gymnasium": "geomdp_envs/compat.py"}
 
 
 def changed(dependency: str, what: str) -> str:
-    return (f"{dependency} {version(dependency)}: {what} "
-            f"(the adapter to fix: agents/compat/{dependency}.py)")
+    adapter = ADAPTERS.get(dependency, f"agents/compat/{dependency}.py")
+    return f"{dependency} {version(dependency)}: {what} (the adapter to fix: {adapter})"
 
 
 @contextlib.contextmanager
@@ -154,6 +165,84 @@ def test_torch_dispatch_mode_counts_flops():
         a @ b
     assert Count.total == 2 * 3 * 4 * 5, changed(
         "torch", "a TorchDispatchMode no longer sees aten.mm with its FLOP formula")
+
+
+# target_lag's norms: torch.nn.utils.get_total_norm (public) in place of the private
+# torch._foreach_norm/_foreach_sub it was computed with. target_lag is logged to
+# train.csv every episode, so the two must agree to the bit, not approximately.
+
+
+@torch.no_grad()
+def _old_target_lag(online, target):
+    """target_lag as it was computed before (the private foreach ops), the reference."""
+    gap = torch.stack(torch._foreach_norm(torch._foreach_sub(online, target))).norm()
+    return float(gap / torch.stack(torch._foreach_norm(online)).norm())
+
+
+@torch.no_grad()
+def _new_target_lag(online, target):
+    """What TDMPCAgent.target_lag computes now."""
+    gap = torch.nn.utils.get_total_norm([o - t for o, t in zip(online, target)], foreach=True)
+    return float(gap / torch.nn.utils.get_total_norm(online, foreach=True))
+
+
+SHAPES = [[(3,)], [(7, 5), (5,), (1,)], [(), (64, 32), (32,), (2, 3, 4), (0,), (1000,)],
+          [(256, 512), (512,), (512, 4), (4,), (33, 17, 3)]]
+
+
+CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=CUDA)])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("shapes", SHAPES, ids=[f"{len(s)}-tensors" for s in SHAPES])
+def test_torch_get_total_norm_gives_target_lag_bit_for_bit(shapes, dtype, device):
+    generator = torch.Generator().manual_seed(len(shapes))
+    for scale in (1.0, 1e-3, 1e3):
+        online = [(torch.randn(s, generator=generator, dtype=dtype) * scale).to(device)
+                  for s in shapes]
+        target = [o + (torch.randn(o.shape, generator=generator, dtype=dtype) * scale * 0.01).to(device)
+                  for o in online]
+        for a, b in ((online, target), (online, online)):
+            old, new = _old_target_lag(a, b), _new_target_lag(a, b)
+            assert new == old, changed("torch", f"get_total_norm differs from the foreach norms "
+                                                f"(target_lag {new!r} != {old!r})")
+        old_norm = torch.stack(torch._foreach_norm(online)).norm()
+        assert torch.equal(torch.nn.utils.get_total_norm(online, foreach=True), old_norm)
+
+
+def _updated_agent(group, device="cpu"):
+    cfg = TDMPCConfig.from_dict({"group": group, "batch_size": 8, "horizon": 3, "tau": 0.2,
+                                 "target_update_every": 1,
+                                 "networks": {"hidden_dim": 32, "latent_dim": 16}})
+    sym = gymnasium.make("GeoMDP/PointMass2D-v0").unwrapped.symmetry
+    agent = TDMPCAgent(cfg, sym, sym.observation_size, sym.action_size, device=device, seed=0)
+    g = torch.Generator().manual_seed(0)
+    n, h = 8, 3
+    batch = TensorDict({
+        "observation": torch.randn(n, h, sym.observation_size, generator=g) * 0.2,
+        "action": torch.rand(n, h, sym.action_size, generator=g) * 1.4 - 0.7,
+        "next": {"observation": torch.randn(n, h, sym.observation_size, generator=g) * 0.2,
+                 "reward": torch.rand(n, h, 1, generator=g),
+                 "terminated": torch.zeros(n, h, 1, dtype=torch.bool)}}, batch_size=[n, h])
+    return agent, batch
+
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=CUDA)])
+@pytest.mark.parametrize("group", ["none", "D8"])
+def test_agent_target_lag_is_bit_identical_to_the_foreach_formula(group, device):
+    """On a real agent's online and target parameter lists, before and after updates."""
+    agent, batch = _updated_agent(group, device)
+    lags = []
+    for _ in range(4):
+        online = list(agent.model.parameters())
+        target = list(agent.loss.target_model.parameters())
+        lag = agent.target_lag()
+        assert lag == _old_target_lag(online, target) == _new_target_lag(online, target), changed(
+            "torch", "TDMPCAgent.target_lag differs from the foreach formula it replaced")
+        lags.append(lag)
+        agent.update(batch)
+    assert lags[0] == 0 and 0 < lags[-1] < 1
 
 
 # --------------------------------------------------------------------------- torchrl
@@ -354,3 +443,78 @@ def test_escnn_basis_expansion_key():
     keys = layer.state_dict()
     flagged = {k for k in keys if is_basis_expansion_key(k)}
     assert flagged and flagged == {k for k in keys if k.startswith(BASIS_EXPANSION + ".")}
+
+
+def test_escnn_linear_buffers():
+    layer = enn.Linear(*_types("D4", ["regular", (0, 0)], ["regular", (1, 1), (0, 0)]))
+    names = {mode: None for mode in ("train", "eval")}
+    for mode in names:
+        layer.train(mode == "train")
+        names[mode] = {k.rsplit(".", 1)[-1] for k in layer.state_dict()
+                       if not is_basis_expansion_key(k)} - {"weights", "bias"}
+    assert names["train"] <= names["eval"] == set(LINEAR_BUFFERS), changed(
+        "escnn", f"Linear's own buffers are {sorted(names['eval'])}, not {sorted(LINEAR_BUFFERS)}")
+    assert all(is_linear_buffer(n) for n in LINEAR_BUFFERS) and not is_linear_buffer("weights")
+    assert not is_linear_buffer("bias")
+
+
+def test_escnn_bias_expansion():
+    torch.manual_seed(0)
+    layer = enn.Linear(*_types("D4", ["regular"] * 2, ["regular", (1, 1), (0, 0)]))
+    with torch.no_grad():
+        layer.bias.normal_()
+    with internal("escnn", "Linear.bias_expansion"):
+        matrix = bias_expansion(layer)
+    _, expected = layer.expand_parameters()
+    assert matrix.shape == (layer.out_type.size, layer.bias.numel()) and torch.allclose(
+        matrix @ layer.bias, expected, atol=1e-6), changed(
+        "escnn", "Linear.bias_expansion @ Linear.bias is not the bias expand_parameters() gives")
+
+
+def test_escnn_buffers_are_what_an_agent_leaves_out_of_its_checkpoints():
+    """Every entry of an escnn ``Linear`` in an equivariant agent's state dict (online and
+    target) is one of its coefficients (``weights``, ``bias``: saved) or one that escnn
+    rebuilds with the layer, and is recognised as such."""
+    agent, _ = _updated_agent("D8")
+    entries = [k for k in agent.loss.state_dict() if ".layer." in k]
+    coefficients = [k for k in entries if k.rsplit(".", 1)[-1] in ("weights", "bias")]
+    rebuilt = [k for k in entries if rebuilt_with_networks(k)]
+    assert coefficients and rebuilt and not set(coefficients) & set(rebuilt)
+    assert sorted(coefficients + rebuilt) == sorted(entries), changed(
+        "escnn", "Linear has state-dict entries that agents.compat.escnn does not name: "
+                 f"{sorted(set(entries) - set(coefficients) - set(rebuilt))[:3]}")
+    assert any(k.endswith(".bias_expansion") for k in rebuilt)
+
+
+# ------------------------------------------------------------------------- gymnasium
+
+
+def test_gymnasium_observe():
+    env = gymnasium.make("Reacher-v5").unwrapped
+    assert can_observe(env) and not can_observe(gymnasium.Env()), changed(
+        "gymnasium", "a MuJoCo env no longer has MujocoEnv._get_obs")
+    obs, _ = env.reset(seed=0)
+    with internal("gymnasium", "MujocoEnv._get_obs"):
+        np.testing.assert_array_equal(observe(env), obs)
+    stepped = env.step(np.array([0.3, -0.2], dtype=np.float32))[0]
+    assert np.array_equal(observe(env), stepped) and observe(env) is not observe(env), changed(
+        "gymnasium", "MujocoEnv._get_obs is not the observation step() returns (or is not fresh)")
+
+
+def test_gymnasium_restore_random_state():
+    env = gymnasium.make("Reacher-v5").unwrapped
+    env.reset(seed=7)
+    env.np_random.random()  # a generator part-way through its stream
+    saved = random_state(env)
+    expected = copy.deepcopy(saved[0]).random(3)
+    env.reset(seed=11)
+    assert env.np_random_seed == 11
+    env.np_random = np.random.default_rng(0)
+    assert env.np_random_seed == -1, changed(
+        "gymnasium", "the np_random setter no longer records the seed as -1: "
+                     "restore_random_state may no longer be needed")
+    with internal("gymnasium", "Env._np_random_seed"):
+        restore_random_state(env, saved)
+    assert env.np_random_seed == 7 and env.np_random is saved[0], changed(
+        "gymnasium", "writing Env._np_random_seed does not set np_random_seed")
+    np.testing.assert_array_equal(env.np_random.random(3), expected)

@@ -14,7 +14,7 @@ from agents.run.config import RunOptions
 from agents.run.envs import make_gym_env
 from geomdp_envs import check_symmetry, declare, groups, load_declaration, symmetry_of
 from geomdp_envs.check_cli import main as check_main
-from geomdp_envs.declare import Declaration, shipped_declarations
+from geomdp_envs.declare import SHIPPED, Declaration, shipped_declarations
 
 REACHER = load_declaration("reacher_v5")
 PENDULUM = load_declaration("inverted_pendulum_v5")
@@ -228,6 +228,48 @@ def test_bad_declarations_are_refused_with_the_problem_named(change, message):
         reacher(data)
 
 
+@pytest.mark.parametrize("key, valid", [
+    ("dim", r"\(valid: 2, 3\)"),
+    ("continuous_group", r"\(valid: O\(2\), SO\(2\), O\(3\), SO\(3\)\)"),
+    ("exact_group", r"\(the subgroup of continuous_group .*C1 if none; valid: O\(2\), SO\(2\), "
+                    r"C<N>, D<N> \(planar\); O\(3\), SO\(3\), octahedral"),
+    ("observation", r"\(a list of fields \{name, rep, index\}\)"),
+])
+def test_a_declaration_states_every_required_key(key, valid):
+    """No defaults: dim, the groups, observation and action are stated, in YAML, as plain
+    data and as declare's keywords; the error names the key and its valid values."""
+    data = REACHER.to_dict()
+    del data[key]
+    message = f"^declaration: missing key '{key}' {valid}"
+    with pytest.raises(ValueError, match=message):
+        Declaration.from_dict(data)
+    with pytest.raises(ValueError, match=message):
+        reacher(data)
+    with pytest.raises(ValueError, match=message):
+        declare(gymnasium.make("Reacher-v5"), **data)
+
+
+def test_missing_keys_are_named_together_on_one_line(tmp_path):
+    path = tmp_path / "partial.yaml"
+    path.write_text(yaml.safe_dump({k: v for k, v in REACHER.to_dict().items()
+                                    if k not in ("dim", "exact_group")}))
+    with pytest.raises(ValueError) as err:
+        load_declaration(str(path))
+    (line,) = str(err.value).splitlines()
+    assert line.startswith("declaration: missing keys 'dim' (valid: 2, 3), 'exact_group' (the subgroup")
+    # what declare() used to fill in (dim 2, O(2), exact group = continuous group) is not assumed
+    with pytest.raises(ValueError, match="^declaration: missing keys 'dim' .*, 'continuous_group' .*, "
+                                         "'exact_group'"):
+        declare(LinePlant(), observation=LINE["observation"], action=LINE["action"])
+    assert declare(LinePlant(), **LINE).declaration == load_declaration(LINE)
+
+
+def test_shipped_declarations_state_dim_and_exact_group():
+    for name in shipped_declarations():
+        data = yaml.safe_load((SHIPPED / f"{name}.yaml").read_text())
+        assert {"dim", "continuous_group", "exact_group"} <= set(data), name
+
+
 def test_action_bounds_must_be_symmetric_for_signed_fields():
     with pytest.raises(ValueError, match="'push' is sign but its bounds .* are not symmetric about 0"):
         declare(LinePlant(low=0.0), LINE)
@@ -246,8 +288,8 @@ def test_keyword_declaration_tuples_and_yaml_files_give_the_same_declaration(tmp
     assert load_declaration(str(path)) == REACHER
     as_tuples = {k: [(f.name, f.rep, list(f.index)) for f in getattr(REACHER, k)]
                  for k in ("observation", "action")}
-    env = declare(gymnasium.make("Reacher-v5"), exact_group="O(2)", notes=REACHER.notes,
-                  state=REACHER.to_dict()["state"], **as_tuples)
+    env = declare(gymnasium.make("Reacher-v5"), dim=2, continuous_group="O(2)", exact_group="O(2)",
+                  notes=REACHER.notes, state=REACHER.to_dict()["state"], **as_tuples)
     assert env.declaration == REACHER
     assert set(shipped_declarations()) >= {"reacher_v5", "inverted_pendulum_v5"}
     with pytest.raises(ValueError, match="neither a YAML file nor a shipped declaration .*reacher_v5"):
@@ -273,9 +315,13 @@ REACHER_V5 = ["env=gym", "env.id=Reacher-v5", "env.symmetry=reacher_v5", "env.ac
               "train.steps=300", "train.seed_steps=100", "train.eval_every=300"]
 
 
+@pytest.mark.slow
 def test_equivariant_agent_trains_on_a_declared_third_party_env(tmp_path):
     assert run(config(*REACHER_V5, "agent.group=D8"), tmp_path) == 0
-    assert OmegaConf.load(tmp_path / "config.yaml").env.symmetry == "reacher_v5"
+    # config.yaml records the declaration's contents, not its name (a later edit of the file
+    # cannot change what a resumed run uses)
+    recorded = OmegaConf.to_container(OmegaConf.load(tmp_path / "config.yaml"))["env"]["symmetry"]
+    assert recorded == load_declaration("reacher_v5").to_dict()
     assert [int(r["env_step"]) for r in rows(tmp_path / "eval.csv")] == [0, 300]
     # 50-step episodes at action repeat 2: two random episodes (50 updates at the end of
     # seeding, one per agent step of it), then an episode per 25 updates.
@@ -290,6 +336,7 @@ def test_equivariant_agent_trains_on_a_declared_third_party_env(tmp_path):
     assert [int(r["env_step"]) for r in rows(tmp_path / "eval.csv")][-1] == 400
 
 
+@pytest.mark.slow
 def test_reflection_agent_and_augmentation_on_the_inverted_pendulum(tmp_path):
     pendulum = ["env=gym", "env.id=InvertedPendulum-v5", "env.symmetry=inverted_pendulum_v5",
                 "env.action_repeat=1", "train.steps=200", "train.seed_steps=100", "train.eval_every=200"]

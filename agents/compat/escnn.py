@@ -1,4 +1,5 @@
-"""escnn internals: a ``Linear``'s basis-expansion module and the layout of its weights."""
+"""escnn internals: a ``Linear``'s basis-expansion module, its buffers' names, and the
+layout of its weights."""
 
 from __future__ import annotations
 
@@ -20,6 +21,35 @@ def is_basis_expansion_key(key: str) -> bool:
     """Whether a state-dict key belongs to an escnn ``Linear``'s basis-expansion
     module: sampled bases and indices that escnn rebuilds with the layer."""
     return BASIS_EXPANSION in key
+
+
+# The buffers an escnn ``Linear`` registers under its own names: the weight matrix and
+# the bias expanded from the coefficients (eval-mode caches, documented as attributes
+# but not as state-dict entries), and ``bias_expansion``, the change of basis from the
+# bias's coefficients to the output (undocumented). All three are rebuilt with the layer.
+LINEAR_BUFFERS = ("matrix", "expanded_bias", "bias_expansion")
+
+
+def is_linear_buffer(name: str) -> bool:
+    """Whether ``name`` (the last component of a state-dict key) is one of the buffers an
+    escnn ``Linear`` registers itself, rebuilt with the layer (not its parameters).
+
+    Private: the names escnn's ``Linear.__init__`` and ``Linear.train`` pass to
+    ``register_buffer``; escnn lists no public set of them.
+    """
+    return name in LINEAR_BUFFERS
+
+
+def bias_expansion(layer: enn.Linear) -> torch.Tensor:
+    """[out_size, trivials]: the matrix that maps ``layer.bias`` (one coefficient per
+    trivial irrep of the output) to the bias added to the output, ``bias_expansion(layer)
+    @ layer.bias``, as escnn's own ``expand_parameters`` computes it. For a layer with a bias.
+
+    Private: the ``Linear.bias_expansion`` buffer, which escnn's documentation does not
+    list; its public ``expand_parameters()`` also expands the weight matrix, the cost
+    ``agents.nn.layers.EquivariantLinear`` avoids.
+    """
+    return layer.bias_expansion
 
 
 def own_basis_expansion(layer: enn.Linear) -> None:
