@@ -28,7 +28,8 @@ from timing import best_time
 
 import geomdp_envs  # noqa: F401
 from agents import NetworkConfig, build_networks
-from agents.nn.layers import EquivariantLinear, layout_size
+from agents.nn.layers import EquivariantLinear
+from agents.nn.layout import layout_size
 
 TASKS = {2: ("GeoMDP/PointMass2D-v0", {}), 3: ("GeoMDP/PointMass3D-v0", {})}
 GROUPS = [("D4", 2), ("D8", 2), ("octahedral", 3), ("icosahedral", 3)]

@@ -21,13 +21,9 @@ from tensordict import TensorDict
 from torchrl.objectives import SoftUpdate
 
 from agents import NetworkConfig, build_networks
-from agents.nn.layers import (
-    EquivariantLinear,
-    ScopedExpansion,
-    detached_parameters,
-    expansion_scope,
-    parameter_slots,
-)
+from agents.nn.expansion import ScopedExpansion, expansion_scope
+from agents.nn.layers import EquivariantLinear
+from agents.nn.parameters import detached_parameters, parameter_slots
 from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
 from agents.tdmpc.loss import LossConfig, TDMPCLoss
 from agents.tdmpc.world_model import WorldModel

@@ -12,6 +12,7 @@ from test_train import TINY, TRAIN
 
 from agents.cli import plot
 from agents.cli.train import CONFIG_DIR
+from agents.run import results, statistics
 from agents.run.run_tables import evaluation_share, wall_minutes
 from agents.run.td_invariants import bootstrapped_returns, td_invariants
 
@@ -35,6 +36,7 @@ def test_experiment_config_composes_into_a_valid_sweep(name):
     assert str(cfg.hydra.mode) == "RunMode.MULTIRUN"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("launcher", ["joblib", "submitit_local"])
 def test_a_sweep_runs_on_the_launcher(launcher, tmp_path):
     out = subprocess.run(
@@ -70,15 +72,15 @@ def test_plot_handles_unequal_and_unfinished_runs(tmp_path, capsys):
     table = capsys.readouterr().out
     assert "| env steps to reach 800 (per seed) | env steps to reach 880 (per seed) |" in table
     assert "| 3000, 2000 | 3000, – |" in table and "| 1000 | 1000 |" in table
-    runs = plot.group_runs(plot.find_runs([tmp_path]))
-    steps, mean, low, high, n = plot.curve(runs["group=none"])
+    runs = results.group_runs(results.find_runs([tmp_path]))
+    steps, mean, low, high, n = statistics.curve(runs["group=none"])
     assert list(n) == [2, 2, 2, 1] and low[2] <= mean[2] <= high[2]
     # an option only some runs have splits them, unless ignored
     with (tmp_path / "a/2/config.yaml").open("a") as f:
         f.write("  layers: auto\n")
-    found = plot.find_runs([tmp_path])
-    assert "group=none, layers=auto" in plot.group_runs(found)
-    assert set(plot.group_runs(found, ("agent.layers",))) == {"group=none", "group=D8"}
+    found = results.find_runs([tmp_path])
+    assert "group=none, layers=auto" in results.group_runs(found)
+    assert set(results.group_runs(found, ("agent.layers",))) == {"group=none", "group=D8"}
 
 
 def test_plot_pairs_runs_by_seed(tmp_path, capsys):
@@ -167,7 +169,7 @@ def test_plot_contrasts_margins_of_two_experiments(tmp_path, capsys):
     assert 300 <= low <= 375 <= high <= 450
     # scipy's Welch test on (500, 450, 400) vs (100, 50)
     welch = stats.ttest_ind([500, 450, 400], [100, 50], equal_var=False).pvalue
-    assert cells[5] == plot.p_value(welch) and 0.001 < welch < 0.05
+    assert cells[5] == statistics.p_value(welch) and 0.001 < welch < 0.05
     assert cells[6].startswith("+750.0 [")  # the final returns' margins are twice as large
     with pytest.raises(SystemExit, match="--contrast 'D8 medium' is not a group"):
         plot.main([str(tmp_path), *labels, "--contrast", "D8 hard", "plain hard", "D8 medium",
@@ -184,6 +186,7 @@ def test_plot_title_defaults_to_the_folder_the_runs_share(tmp_path):
     assert plot.default_title([tmp_path / "sweep"]) == "sweep"
 
 
+@pytest.mark.slow
 def test_plot_without_runs_is_a_clear_error(tmp_path):
     out = subprocess.run([sys.executable, "-m", "agents.cli.plot", str(tmp_path)],
                          capture_output=True, text=True)

@@ -13,7 +13,7 @@ import torch.nn.functional as F
 from tensordict import TensorDict
 
 from agents import NetworkConfig, build_networks
-from agents.nn.layers import expansion_scope
+from agents.nn.expansion import expansion_scope
 from agents.tdmpc.loss import LossConfig, TDMPCLoss
 from agents.tdmpc.world_model import WorldModel
 

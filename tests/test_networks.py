@@ -6,8 +6,9 @@ import pytest
 import torch
 
 from agents import NetworkConfig, build_networks, group_for_task, make_group, squash
-from agents.nn.layers import EquivariantLinear, FieldLayerNorm, submodules
+from agents.nn.layers import EquivariantLinear, FieldLayerNorm
 from agents.nn.networks import project
+from agents.nn.parameters import submodules
 from geomdp_envs import groups
 from geomdp_envs.declare import declare
 

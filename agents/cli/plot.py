@@ -17,97 +17,38 @@ repeat it to compare against several groups, each pair once); with ``--contrast 
 whether A's margin over B is larger than C's over D (e.g. the same agents on two tasks);
 with ``--runs``, one row per run: its evaluations, wall time and the invariants of a
 working TD learner (``agents.run.td_invariants``), failures named.
+
+Runs are found and grouped by ``agents.run.results`` and their statistics computed by
+``agents.run.statistics``; this module is the command line, the tables and the figure.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import os
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from omegaconf import OmegaConf
 from scipy import stats
 
-from agents.run.nested import flatten, with_added_later
+from agents.run.results import Run, find_runs, group_runs, seed_order
 from agents.run.run_tables import evaluation_share, wall_minutes
+from agents.run.statistics import (
+    curve,
+    differences,
+    mean_ci,
+    mean_ci_of_difference,
+    paired_p,
+    seed_pairs,
+    steps_to_threshold,
+    welch_p,
+)
 from agents.run.td_invariants import td_invariants
-
-IGNORED_KEYS = ("seed", "train.progress", "train.threads", "logger", "device",
-                "train.eval_every", "train.eval_episodes", "train.eval_noisy_episodes",
-                "train.checkpoint_every", "train.video")
-
-
-@dataclass
-class Run:
-    path: Path
-    options: dict[str, object]
-    steps: np.ndarray
-    returns: np.ndarray
-    noisy_returns: np.ndarray  # with the training noise (NaN where not logged)
-
-
-def find_runs(paths: list[Path]) -> list[Run]:
-    runs = []
-    for root in paths:
-        for eval_csv in sorted(root.rglob("eval.csv")):
-            config = eval_csv.parent / "config.yaml"
-            if not config.exists():
-                continue
-            with eval_csv.open(newline="") as f:
-                rows = list(csv.DictReader(f))
-            if not rows:
-                continue
-            options = with_added_later(flatten(OmegaConf.to_container(OmegaConf.load(config),
-                                                                      resolve=False)))
-            runs.append(Run(eval_csv.parent, options,
-                            np.array([int(float(r["env_step"])) for r in rows]),
-                            np.array([float(r["episode_reward"]) for r in rows]),
-                            np.array([float(r.get("noisy_episode_reward") or "nan") for r in rows])))
-    return runs
-
-
-def group_runs(runs: list[Run], ignored: tuple[str, ...] = ()) -> dict[str, list[Run]]:
-    """Runs keyed by the options that differ between them (seed and display options
-    aside, and ``ignored``: e.g. an option added later whose default changes nothing)."""
-    keys = sorted({k for r in runs for k in r.options
-                   if not k.startswith(IGNORED_KEYS + tuple(ignored))
-                   and len({str(x.options.get(k)) for x in runs}) > 1})
-    groups: dict[str, list[Run]] = {}
-    for r in runs:
-        label = ", ".join(f"{k.split('.')[-1]}={r.options.get(k)}" for k in keys) or "all runs"
-        groups.setdefault(label, []).append(r)
-    return groups
-
-
-def bootstrap_ci(samples: tuple[np.ndarray, ...],
-                 statistic: Callable[..., np.ndarray]) -> tuple[float, float]:
-    """95% percentile bootstrap CI of ``statistic`` (each sample resampled on its own;
-    fixed seed, so that tables are reproducible)."""
-    ci = stats.bootstrap(samples, statistic, confidence_level=0.95, n_resamples=2000,
-                         method="percentile", random_state=0).confidence_interval
-    return float(ci.low), float(ci.high)
-
-
-def mean_ci(values: np.ndarray) -> tuple[float, float, float]:
-    """Mean and 95% bootstrap confidence interval (the mean itself when n < 2)."""
-    mean = float(np.mean(values))
-    if len(values) < 2 or np.all(values == values[0]):
-        return mean, mean, mean
-    return mean, *bootstrap_ci((values,), np.mean)
 
 
 def signed(mean_low_high: tuple[float, float, float]) -> str:
     """A difference with its CI, as the paired tables print it: ``+12.3 [-4.5, +20.1]``."""
     return "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_low_high)
-
-
-def seed_order(seed: object) -> str:
-    """Sort key: seeds in numeric order (2 before 10) whether they are ints or strings."""
-    return str(seed).zfill(12)
 
 
 def require_groups(option: str, names: list[str], groups: dict[str, list[Run]]) -> None:
@@ -116,22 +57,6 @@ def require_groups(option: str, names: list[str], groups: dict[str, list[Run]]) 
     if unknown:
         raise SystemExit(f"geomdp-plot: error: {option} {unknown[0]!r} is not a group; groups: "
                          f"{', '.join(groups)}")
-
-
-def curve(runs: list[Run]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(steps, mean, ci low, ci high, seeds) over the union of evaluation steps."""
-    steps = np.unique(np.concatenate([r.steps for r in runs]))
-    out = []
-    for s in steps:
-        values = np.array([r.returns[r.steps == s][0] for r in runs if s in r.steps])
-        out.append((*mean_ci(values), len(values)))
-    mean, low, high, n = (np.array(c) for c in zip(*out))
-    return steps, mean, low, high, n
-
-
-def steps_to_threshold(run: Run, threshold: float) -> int | None:
-    reached = run.steps[run.returns >= threshold]
-    return int(reached[0]) if len(reached) else None
 
 
 def table(groups: dict[str, list[Run]], thresholds: list[float]) -> str:
@@ -185,23 +110,6 @@ def paired_table(groups: dict[str, list[Run]], baselines: list[str]) -> str:
     return "\n".join(rows)
 
 
-def seed_pairs(runs: list[Run], baseline: list[Run]) -> list[tuple[object, Run, Run]]:
-    """(seed, run, baseline run) for every seed both have, by seed."""
-    base = {r.options.get("seed"): r for r in baseline}
-    return sorted(((r.options.get("seed"), r, base[r.options.get("seed")]) for r in runs
-                   if r.options.get("seed") in base), key=lambda t: seed_order(t[0]))
-
-
-def differences(pairs: list[tuple[object, Run, Run]]) -> tuple[np.ndarray, np.ndarray]:
-    """Per seed: the differences of the mean return over all evaluations, and of the final return."""
-    return (np.array([a.returns.mean() - b.returns.mean() for _, a, b in pairs]),
-            np.array([a.returns[-1] - b.returns[-1] for _, a, b in pairs]))
-
-
-def p_value(p: float) -> str:
-    return f"{p:.3f}" if p >= 0.001 else f"{p:.1e}"  # never a bare 0.000
-
-
 def paired_row(comparison: str, pairs: list[tuple[object, Run, Run]]) -> str:
     """One row of ``paired_table``: ``pairs`` are (seed, run, baseline run)."""
     area, final = differences(pairs)
@@ -209,13 +117,6 @@ def paired_row(comparison: str, pairs: list[tuple[object, Run, Run]]) -> str:
     return (f"| {comparison} | {len(pairs)} | {per_seed} | {signed(mean_ci(area))} | "
             f"{paired_p(area)} | {int((area > 0).sum())} of {len(pairs)} | "
             f"{signed(mean_ci(final))}, {paired_p(final)} |")
-
-
-def paired_p(d: np.ndarray) -> str:
-    """Paired t-test of per-seed differences against 0 (– where it is undefined)."""
-    if len(d) < 2 or np.all(d == d[0]):
-        return "–"
-    return p_value(stats.ttest_1samp(d, 0.0).pvalue)
 
 
 def contrast_table(groups: dict[str, list[Run]], contrasts: list[list[str]]) -> str:
@@ -241,20 +142,6 @@ def contrast_table(groups: dict[str, list[Run]], contrasts: list[list[str]]) -> 
                  f"{signed(mean_ci_of_difference(final_1, final_2))}, {welch_p(final_1, final_2)}"]
         rows.append("| " + " | ".join(cells) + " |")
     return "\n".join(rows)
-
-
-def mean_ci_of_difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
-    """mean(a) − mean(b) and its 95% bootstrap CI, a and b resampled independently."""
-    mean = float(np.mean(a) - np.mean(b))
-    if np.all(a == a[0]) and np.all(b == b[0]):
-        return mean, mean, mean
-    return mean, *bootstrap_ci((a, b), lambda x, y, axis: np.mean(x, axis) - np.mean(y, axis))
-
-
-def welch_p(a: np.ndarray, b: np.ndarray) -> str:
-    if np.var(a) == 0 and np.var(b) == 0:
-        return "–"
-    return p_value(stats.ttest_ind(a, b, equal_var=False).pvalue)
 
 
 def runs_table(groups: dict[str, list[Run]]) -> str:

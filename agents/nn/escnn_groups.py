@@ -228,6 +228,14 @@ def _continuous_group(name: str, max_frequency: int | None,
     return AgentGroup(name, group, dim, max_frequency, grid_frequency)
 
 
+GROUP_NAMES = "C<N>, D<N> (N >= 1), SO2, O2 (planar); octahedral, icosahedral, SO3, O3 (3D)"
+
+
+def is_group_name(name: str) -> bool:
+    """Whether ``name`` is a group the agent can build (for some task)."""
+    return name in CONTINUOUS_GROUPS or bool(_PLANAR.match(name)) or name in SPATIAL_GROUPS
+
+
 def valid_groups(symmetry: Symmetry) -> tuple[str, ...]:
     """The named groups that act on a task with this declaration."""
     named = PLANAR_GROUPS if symmetry.dim == 2 else SPATIAL_GROUPS
@@ -248,7 +256,7 @@ def group_for_task(name: str, symmetry: Symmetry, max_frequency: int | None = No
     unless ``allow_approximate``.
     """
     valid = ", ".join(valid_groups(symmetry))
-    if name not in CONTINUOUS_GROUPS and not _PLANAR.match(name) and name not in SPATIAL_GROUPS:
+    if not is_group_name(name):
         raise ValueError(f"unknown group {name!r}; valid groups for this {symmetry.dim}D task: "
                          f"{valid}")
     group = make_group(name, max_frequency, grid_frequency)

@@ -27,15 +27,9 @@ import torch
 from torch import nn
 
 from agents.nn.activations import ACTIVATIONS
-from agents.nn.escnn_groups import AgentGroup, field_type, group_for_task
-from agents.nn.layers import (
-    LINEAR_KINDS,
-    Layout,
-    concat,
-    layout_size,
-    make_linear,
-    norm_and_activation,
-)
+from agents.nn.escnn_groups import GROUP_NAMES, AgentGroup, field_type, group_for_task, is_group_name
+from agents.nn.layers import LINEAR_KINDS, make_linear, norm_and_activation
+from agents.nn.layout import Layout, concat, layout_size
 from agents.nn.spectral import Quadrature
 from agents.options import OptionError, check, key, option, unknown
 from geomdp_envs.symmetry import Field, Symmetry
@@ -62,6 +56,9 @@ class Equivariance:
         if self.group == "none":
             self.group = None
         check(self)
+        if self.group is not None and not is_group_name(self.group):
+            raise OptionError(f"{key(Equivariance, 'group')}={self.group!r}; valid: none, "
+                              f"{GROUP_NAMES} (the task decides which apply)")
         for name in self.equivariant:
             if name not in COMPONENTS:
                 raise unknown(f"{key(Equivariance, 'equivariant')}.{name}", COMPONENTS)

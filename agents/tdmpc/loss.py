@@ -29,7 +29,8 @@ from tensordict.nn import TensorDictParams
 from torchrl.objectives import LossModule
 
 from agents.compat.torchrl import expect_target_updater
-from agents.nn.layers import detached_parameters, expansion_scope, parameter_slots
+from agents.nn.expansion import expansion_scope
+from agents.nn.parameters import detached_parameters, parameter_slots
 from agents.options import check, option
 from agents.tdmpc.world_model import WorldModel
 
