@@ -45,7 +45,7 @@ def key(cls: type, name: str) -> str:
     return f"{prefix}.{name}" if prefix else name
 
 
-def _show(value: Any) -> str:
+def show(value: Any) -> str:
     """A value as YAML writes it (true, false, null)."""
     if isinstance(value, bool) or value is None:
         return {True: "true", False: "false", None: "null"}[value]
@@ -88,7 +88,7 @@ def _check_range(name: str, value: Any, meta: Mapping[str, Any]) -> None:
     if choices is not None:
         # 1 == True in Python: a choice matches only a value of the same type
         if not any(value == c and type(value) is type(c) for c in choices):
-            raise OptionError(f"{name}={value!r}; valid: {', '.join(_show(c) for c in choices)}")
+            raise OptionError(f"{name}={value!r}; valid: {', '.join(show(c) for c in choices)}")
         return
     low, high = meta.get("low"), meta.get("high")
     if value is None or (low is None and high is None):

@@ -60,7 +60,7 @@ def main() -> None:
         start, done, terminated = obs[:2].copy(), False, False
         values, rewards = [], []  # per agent step
         frames = [] if args.video and episode == 0 else None
-        agent.planner.reset()
+        agent.start_episode()
         while not done:
             if frames is not None:
                 frames.append(env.render())

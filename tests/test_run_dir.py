@@ -4,10 +4,13 @@ run really used."""
 import subprocess
 import sys
 
+import pytest
 from test_train import TINY, TRAIN, config
 
 from agents.cli.train import run
 from agents.run.run_dir import RunDirLock
+
+pytestmark = pytest.mark.slow  # every test trains an agent or starts geomdp-train
 
 
 def test_a_second_process_on_a_run_directory_is_refused_in_one_line(tmp_path, capsys):

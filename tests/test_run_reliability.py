@@ -17,6 +17,8 @@ from test_train import config, rows
 from agents.cli.train import CONFIG_DIR, run, sweep_dirname, usable_cores
 from agents.run import checkpoint
 
+pytestmark = pytest.mark.slow  # trains agents, kills and resumes them
+
 LOGS = ("eval.csv", "train.csv")
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -135,7 +137,7 @@ def test_a_failed_checkpoint_write_is_one_line_and_keeps_the_last_one(tmp_path, 
 
 def test_run_directory_that_cannot_be_made_is_one_line(tmp_path, capsys):
     (tmp_path / "a_file").write_text("")
-    assert run(config(), tmp_path / "a_file" / "run") == 1
+    assert run(config(), tmp_path / "a_file" / "run") == 2  # a path that cannot be a directory
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot create the run directory" in err[0]
 

@@ -1,3 +1,4 @@
+import re
 import runpy
 import sys
 from pathlib import Path
@@ -163,10 +164,21 @@ def test_refusals(pointmass):
         env.reset()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("flags", [[], ["--augment"]])
 def test_torchrl_sac_example_trains_with_and_without_augmentation(flags, monkeypatch, capsys, one_thread):
     monkeypatch.setattr(sys, "argv", ["torchrl_sac", "--steps", "300", "--eval-episodes", "1", *flags])
     runpy.run_path(str(ROOT / "examples" / "torchrl_sac_augmented.py"), run_name="__main__")
-    out = capsys.readouterr().out
+    captured = capsys.readouterr()
+    out = captured.out
     assert "over 1 episodes after 300 steps" in out
     assert ("augmenting with D4" in out) == bool(flags)
+    assert "300/300" in captured.err and "steps/s" in captured.err  # the progress bar
+    assert torch.get_num_threads() == 1  # --threads 1 is the default
+    moved = re.search(r"augmentation moved (\d+) of (\d+) sampled transitions", out)
+    if not flags:
+        assert moved is None, out
+        return
+    n_moved, n_sampled = map(int, moved.groups())
+    # an update of 256 samples per step once 100 are stored; D4 moves all but the identity's
+    assert n_sampled >= 100 * 256 and 0.8 * n_sampled < n_moved < 0.95 * n_sampled, out

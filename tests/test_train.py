@@ -34,6 +34,7 @@ def rows(path, drop=("wall_time", "steps_per_second")):
         return [{k: v for k, v in r.items() if k not in drop} for r in csv.DictReader(f)]
 
 
+@pytest.mark.slow
 def test_smoke_run_writes_everything(tmp_path):
     assert run(config("agent.group=D4", "train.eval_noisy_episodes=1"), tmp_path) == 0
     for name in ("config.yaml", "eval.csv", "train.csv", "checkpoint/agent.pt",
@@ -54,6 +55,7 @@ def test_smoke_run_writes_everything(tmp_path):
     assert session["git_dirty"] in ("True", "False", "unknown") and session["torch"] != "absent"
 
 
+@pytest.mark.slow
 def test_same_seed_gives_the_same_eval_csv(tmp_path):
     for d in ("a", "b"):
         assert run(config("seed=3"), tmp_path / d) == 0
@@ -87,6 +89,7 @@ def uninterrupted(tmp_path_factory):
     return get
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("agent, kill_at", KILLS)
 def test_killed_run_resumes_to_the_same_result(tmp_path, uninterrupted, agent, kill_at):
     """kill -9 at a chosen point (random seeding, an update, an evaluation, the middle
@@ -105,6 +108,7 @@ def test_killed_run_resumes_to_the_same_result(tmp_path, uninterrupted, agent, k
     assert not (tmp_path / "checkpoint.old").exists() and not (tmp_path / "checkpoint.tmp").exists()
 
 
+@pytest.mark.slow
 def test_sigterm_stops_at_a_safe_point_with_one_line(tmp_path):
     """SIGTERM during an equivariant run's updates: the loop stops between updates, with
     one line and no traceback; the same command then finishes the run."""
@@ -125,6 +129,7 @@ def test_sigterm_stops_at_a_safe_point_with_one_line(tmp_path):
     assert finished.returncode == 0, finished.stderr[-2000:]
 
 
+@pytest.mark.slow
 def test_a_second_signal_while_stopping_exits_130(tmp_path):
     """SIGTERM, then another while the process is stopping or shutting down (as a
     supervisor that repeats its signal does): the status stays 130, never 143."""
@@ -144,6 +149,7 @@ def test_a_second_signal_while_stopping_exits_130(tmp_path):
         assert proc.returncode == 130, (pause, proc.returncode, err[-1000:])
 
 
+@pytest.mark.slow
 def test_corrupted_checkpoint_is_reported_and_kept(tmp_path, capsys):
     assert run(config(), tmp_path) == 0
     agent_file = tmp_path / "checkpoint/agent.pt"
@@ -153,6 +159,7 @@ def test_corrupted_checkpoint_is_reported_and_kept(tmp_path, capsys):
     assert agent_file.read_bytes() == b"not a checkpoint"  # never overwritten
 
 
+@pytest.mark.slow
 def test_changed_options_are_refused_on_resume(tmp_path, capsys):
     assert run(config(), tmp_path) == 0
     assert run(config("agent.group=D8"), tmp_path) == 2
@@ -161,7 +168,8 @@ def test_changed_options_are_refused_on_resume(tmp_path, capsys):
 
 @pytest.mark.parametrize("overrides, message", [
     (["env=CartPoleX-v9"], "unknown environment 'CartPoleX-v9'"),
-    (["agent.group=Q8"], "unknown group 'Q8'; valid groups for this 2D task: C4, C8"),
+    (["agent.group=Q8"], "agent.group='Q8'; valid: none, C<N>, D<N> (N >= 1), SO2, O2"),
+    (["agent.group=D7", "env=pointmass3d"], "group D7 acts in 2D but the task is 3D"),
     (["agent.group=icosahedral"], "acts in 3D but the task is 2D"),
     (["env=reacher", "agent.group=octahedral"], "acts in 3D but the task is 2D"),
     (["env=pointmass3d", "agent.group=D8"], "acts in 2D but the task is 3D"),
@@ -218,6 +226,7 @@ def test_bad_input_fails_fast_with_one_clear_line(overrides, message, tmp_path, 
     assert time.time() - start < 30
 
 
+@pytest.mark.slow
 def test_bad_input_on_the_command_line_exits_2_and_leaves_no_directory(tmp_path):
     """The same through the console script: Hydra makes the run directory before the
     app starts; a refused run removes it again."""
@@ -230,12 +239,14 @@ def test_bad_input_on_the_command_line_exits_2_and_leaves_no_directory(tmp_path)
     assert not run_dir.exists()
 
 
+@pytest.mark.slow
 def test_approximate_group_warns_once_and_trains(tmp_path):
     with pytest.warns(UserWarning, match="D8 is only an approximate symmetry") as record:
         assert run(config("agent.group=D8", "train.steps=1000"), tmp_path) == 0
     assert sum("approximate" in str(w.message) for w in record) == 1
 
 
+@pytest.mark.slow
 def test_plain_agent_on_any_gymnasium_env(tmp_path):
     out = subprocess.run([*TRAIN, *TINY, "env=Pendulum-v1", "train.steps=400",
                           "train.seed_steps=200", "train.eval_every=400",
@@ -261,7 +272,8 @@ def test_cuda(tmp_path):
     assert run(config("device=cuda", "agent.group=D4"), tmp_path) == 0
 
 
+@pytest.mark.slow
 def test_progress_bar_shows_returns_for_people(tmp_path, capsys):
     assert run(config("train.progress=true", "train.steps=1000"), tmp_path) == 0
     err = capsys.readouterr().err
-    assert "eval_return=0.0" in err and "e-" not in err.split("eval_return=")[-1][:12]
+    assert "eval return 0.0" in err and "e-" not in err.split("eval return ")[-1][:12]

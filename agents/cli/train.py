@@ -24,18 +24,23 @@ from collections.abc import Callable
 from pathlib import Path
 
 import hydra
+from hydra import compose, initialize_config_dir
 from hydra.core.hydra_config import HydraConfig
+from hydra.errors import ConfigCompositionException, MissingConfigException, OverrideParseException
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-from agents.options import OptionError
+from agents.cli.launch import exit_interrupted
+from agents.options import OptionError, unknown
 from agents.run import checkpoint
-from agents.run.config import RunOptions, check_task
+from agents.run.config import RunOptions, check_task, record_declaration
 from agents.run.run_dir import (
     RunDirError,
     RunDirLock,
+    changed_options,
     check_same_options,
     check_writable,
+    make_run_dir,
     remove_if_only_hydra_files,
     write_records,
 )
@@ -94,14 +99,6 @@ def _stop_handler(stop: StopRequest) -> Callable[[int, object], None]:
     return handler
 
 
-def _exit_interrupted(signum: int, frame: object) -> None:
-    """After the run has stopped (or before it starts): a signal ends the process with
-    the interrupted status, not the default action's 143."""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(130)
-
-
 # --- one run ---------------------------------------------------------------------------
 def run(cfg: DictConfig, run_dir: Path, hydra_records: tuple[DictConfig, DictConfig, list[str]]
         | None = None) -> int:
@@ -109,7 +106,8 @@ def run(cfg: DictConfig, run_dir: Path, hydra_records: tuple[DictConfig, DictCon
     ``hydra_records`` (composed config, Hydra's config, overrides) are written to
     ``.hydra/`` once the run is accepted."""
     try:
-        options = RunOptions.from_config(OmegaConf.to_container(cfg, resolve=True))
+        options = RunOptions.from_config(record_declaration(OmegaConf.to_container(cfg,
+                                                                                   resolve=True)))
         task = check_task(options)
     except OptionError as err:
         remove_if_only_hydra_files(run_dir)
@@ -118,18 +116,17 @@ def run(cfg: DictConfig, run_dir: Path, hydra_records: tuple[DictConfig, DictCon
     stop = StopRequest()
     previous = {s: signal.signal(s, _stop_handler(stop)) for s in (signal.SIGTERM, signal.SIGINT)}
     try:
-        try:
-            run_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise RunDirError(f"cannot create the run directory {run_dir} ({err.strerror}); "
-                              "choose another hydra.run.dir") from None
+        make_run_dir(run_dir)
         with RunDirLock(run_dir):  # first: nothing below reads what another process writes
             check_writable(run_dir)
             check_same_options(run_dir, options.resolved)
+            changed = changed_options(run_dir, options.resolved)
             write_records(run_dir, options.resolved, *(hydra_records or ()))
             log = RunLog(run_dir, options.logger.tensorboard)
             try:
-                trainer = Trainer(options, run_dir, build_parts(options, task), log, stop)
+                trainer = Trainer(options, run_dir, build_parts(options, task), log, stop,
+                                  {"symmetry_check": task.symmetry_check,
+                                   "changed_options": changed})
                 trainer.restore()
                 trainer.train()
             finally:
@@ -140,8 +137,10 @@ def run(cfg: DictConfig, run_dir: Path, hydra_records: tuple[DictConfig, DictCon
     except KeyboardInterrupt:
         for s in previous:  # stopping: a further signal must not interrupt the report
             signal.signal(s, signal.SIG_IGN)
-        print(f"\ninterrupted; the last checkpoint is at env step {checkpoint.saved_step(run_dir)}: "
-              "run the same command to continue", file=sys.stderr)
+        step = checkpoint.saved_step(run_dir)
+        where = (f"the last checkpoint is at env step {step}: run the same command to continue"
+                 if step else "no checkpoint yet: the same command starts the run over")
+        print(f"\ninterrupted; {where}", file=sys.stderr)
         return 130
     finally:
         for s, handler in previous.items():
@@ -156,10 +155,14 @@ def hydra_main(cfg: DictConfig) -> None:
     status = run(cfg, Path(hydra_cfg.runtime.output_dir),
                  (cfg, hydra_cfg, list(hydra_cfg.overrides.task)))
     if status == 130 and hydra_cfg.mode == RunMode.RUN:  # not a multirun's worker
-        # Interrupted, with everything saved and the logs closed: leave now. Python's own
-        # shutdown restores the default signal actions first, so a second signal during
-        # it (a supervisor repeating SIGTERM) would end the process with 143 instead.
-        _exit_interrupted(signal.SIGTERM, None)
+        # Interrupted, with everything saved and the logs closed: ignore further signals
+        # (a supervisor repeating SIGTERM) and exit normally. Python's shutdown keeps an
+        # ignored signal ignored (a handler would be reset to the default action, ending
+        # the process with 143), and a normal exit releases the semaphores that the
+        # libraries made (os._exit left them to multiprocessing's resource tracker, which
+        # warned of leaks after the one-line message).
+        for s in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(s, signal.SIG_IGN)
     if status:
         sys.exit(status)
 
@@ -175,10 +178,55 @@ def rewrite_env_shorthand(argv: list[str]) -> list[str]:
     return out
 
 
+def _compose(overrides: list[str]) -> DictConfig:
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        return compose("train", overrides=overrides, return_hydra_config=True)
+
+
+def command_line_error(overrides: list[str]) -> str | None:
+    """What Hydra would refuse in a many-line report (an unknown key, an unknown config
+    group option, an unparsable override), said in one line; then the run directory,
+    which Hydra creates before ``run`` is reached, is made here so that one that cannot
+    be made is one line too. None: Hydra may take over. A multirun, or Hydra's own
+    flags, are left to Hydra."""
+    if any(arg.startswith("-") for arg in overrides):
+        return None
+    try:
+        cfg = _compose(overrides)
+    except MissingConfigException as err:
+        group, _, name = (err.missing_cfg_file or "").rpartition("/")
+        valid = ", ".join(err.options or []) or "none found"
+        return f"unknown {group or 'config'}={name}; valid: {valid}"
+    except OverrideParseException as err:
+        return f"cannot parse an override: {str(err).splitlines()[0]}"
+    except ConfigCompositionException as err:
+        bad = getattr(err.__cause__, "full_key", None)
+        if not bad:
+            return " ".join(str(err).split())
+        parent, _, _ = str(bad).rpartition(".")
+        rest = [o for o in overrides if not o.lstrip("+~").startswith(f"{bad}=")]
+        try:
+            base = _compose(rest)
+            node = OmegaConf.select(base, parent) if parent else base
+        except (ConfigCompositionException, MissingConfigException, OverrideParseException):
+            node = None
+        valid = [k for k in node.keys() if k != "hydra"] if isinstance(node, DictConfig) else []
+        return str(unknown(str(bad), valid))
+    try:
+        make_run_dir(Path(cfg.hydra.run.dir))
+    except OptionError as err:
+        return str(err)
+    return None
+
+
 def main() -> None:
     for s in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(s, _exit_interrupted)
+        signal.signal(s, exit_interrupted)
     sys.argv = [sys.argv[0], *rewrite_env_shorthand(sys.argv[1:])]
+    error = command_line_error(sys.argv[1:])
+    if error is not None:
+        print(f"geomdp-train: error: {error}", file=sys.stderr)
+        sys.exit(2)
     hydra_main()
 
 

@@ -12,27 +12,41 @@ import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
+import gymnasium
 import torch
 
 from agents.nn.escnn_groups import group_for_task
 from agents.options import OptionError, check, from_dict, option
-from agents.run.envs import TASK_ENVS, make_gym_env
+from agents.run.envs import TASK_ENVS, EnvOptions, make_gym_env
 from agents.run.nested import flatten
 from agents.tdmpc.agent import TDMPCConfig
 from agents.tdmpc.augmentation import augmentation_group
 from geomdp_envs import symmetry_of
-from geomdp_envs.declare import shipped_declarations
+from geomdp_envs.check import check_symmetry
+from geomdp_envs.declare import load_declaration, shipped_declarations
 from geomdp_envs.symmetry import Symmetry
 
 # Options that may change when a run is continued (budgets and display), and the rest must not.
 RESUMABLE_KEYS = ("train.steps", "train.eval_every", "train.eval_episodes",
                   "train.eval_noisy_episodes", "train.progress", "train.checkpoint_every",
-                  "train.video", "train.threads", "device", "logger.tensorboard")
+                  "train.video", "train.threads", "device", "logger.tensorboard",
+                  "env.check_symmetry")
 
 
 def fixed_options(flat: dict[str, Any]) -> dict[str, Any]:
     """The flattened options a continued run must keep (all but ``RESUMABLE_KEYS``): what
-    a checkpoint belongs to, and what a resume in the same run directory is checked on."""
+    a checkpoint belongs to, and what a resume in the same run directory is checked on.
+    A declaration recorded by name (runs made before ``record_declaration``) is compared
+    by its contents."""
+    source = flat.get("env.symmetry")
+    if isinstance(source, str):
+        try:
+            contents = load_declaration(source).to_dict()
+        except (ValueError, TypeError):
+            contents = None  # unreadable now: compared by name, so refused as changed
+        if contents is not None:
+            flat = {**{k: v for k, v in flat.items() if k != "env.symmetry"},
+                    **flatten(contents, "env.symmetry.")}
     return {k: v for k, v in flat.items() if not k.startswith(RESUMABLE_KEYS)}
 
 
@@ -64,29 +78,6 @@ class LoggerOptions:
 
     def __post_init__(self) -> None:
         check(self)
-
-
-@dataclass
-class EnvOptions:
-    """Which env (``id``), its action repeat, the symmetry declaration of a third-party env
-    (``symmetry``: a shipped name, a YAML path or the mapping itself; see
-    ``geomdp_envs.declare``), and the keyword arguments of ``gymnasium.make`` (every other
-    key of the ``env`` section)."""
-
-    KEY: typing.ClassVar[str] = "env"
-    id: str  # no default: a config without one is an error, not PointMass2D
-    name: str = ""
-    action_repeat: int = option(1, low=1)
-    symmetry: dict[str, Any] | str | None = None
-    kwargs: dict[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        check(self)
-
-    @classmethod
-    def from_section(cls, section: dict[str, Any]) -> EnvOptions:
-        meta = {k: v for k, v in section.items() if k in ("name", "id", "action_repeat", "symmetry")}
-        return from_dict(cls, {**meta, "kwargs": {k: v for k, v in section.items() if k not in meta}})
 
 
 @dataclass
@@ -127,13 +118,59 @@ class RunOptions:
         return fixed_options(flatten(plain))
 
 
+def record_declaration(resolved: dict[str, Any]) -> dict[str, Any]:
+    """The resolved config with ``env.symmetry`` given by its contents, not by a file name
+    or shipped name: ``config.yaml`` then records the declaration the run was made with,
+    and a resume whose declaration has changed since is refused like any changed option."""
+    env = resolved.get("env")
+    if not isinstance(env, dict) or not isinstance(env.get("symmetry"), str):
+        return resolved
+    try:
+        contents = load_declaration(env["symmetry"]).to_dict()
+    except (ValueError, TypeError) as err:
+        raise OptionError(f"env.symmetry: {err}") from None
+    return {**resolved, "env": {**env, "symmetry": contents}}
+
+
 @dataclass(frozen=True)
 class Task:
-    """What the agent needs to know about the task: its declaration and vector sizes."""
+    """What the agent needs to know about the task: its declaration and vector sizes, and
+    how the declaration was checked (``symmetry_check``: passed under which groups,
+    skipped, or empty when there was nothing to check)."""
 
     symmetry: Symmetry | None
     observation_size: int
     action_size: int
+    symmetry_check: str = ""
+
+
+def check_declaration(options: RunOptions, env: gymnasium.Env, symmetry: Symmetry) -> str:
+    """Check a third-party env's declaration (``env.symmetry``) against its simulator under
+    the group it claims exact (which holds every group the agent may use exactly), before
+    anything is written, when the agent uses the symmetry: a failing declaration is refused
+    in one line naming the group and the fields. Returns what ``sessions.csv`` records."""
+    agent = options.agent
+    if options.env.symmetry is None or (agent.group is None and agent.augment == "none"):
+        return ""
+    if not options.env.check_symmetry:
+        return "skipped (env.check_symmetry=false)"
+    group = symmetry.exact_group
+    try:
+        report = check_symmetry(env, group=group, n_trials=32, seed=options.seed)
+    except (ValueError, TypeError) as err:
+        raise OptionError(f"env.symmetry cannot be checked under {group} ({err}); fix the "
+                          "declaration, or pass env.check_symmetry=false to train "
+                          "unchecked") from None
+    if not report.passed:
+        where = ", ".join(f"{name} {report.field_errors[name]:.2e}"
+                          for name in report.failing_fields) or (
+            f"reward {report.max_reward_error:.2e}, next observation "
+            f"{report.max_next_observation_error:.2e}")
+        raise OptionError(f"env.symmetry fails its check under {group}, its exact group: "
+                          f"{where} (tolerance {report.tolerance:.0e}); see geomdp-check "
+                          f"{options.env.id} <declaration> --group {group}, or pass "
+                          "env.check_symmetry=false to train anyway")
+    return f"passed under {group} ({report.n_trials} trials)"
 
 
 def check_task(options: RunOptions) -> Task:
@@ -148,17 +185,21 @@ def check_task(options: RunOptions) -> Task:
         raise OptionError("logger.tensorboard=true but the tensorboard package is not installed "
                           "(pip install tensorboard); use logger.tensorboard=auto or false")
     env = make_gym_env(options.env)
-    task = Task(symmetry_of(env), env.observation_space.shape[0], env.action_space.shape[0])
-    env.close()
+    symmetry = symmetry_of(env)
     agent = options.agent
     if agent.augment != "none":
-        augmentation_group(agent.augment, task.symmetry)
+        augmentation_group(agent.augment, symmetry)
+    if agent.group is not None and symmetry is None:
+        raise OptionError(f"agent.group={agent.group} needs a task that declares its symmetry "
+                          f"({', '.join(TASK_ENVS)}, or env.symmetry=<a YAML file or one of "
+                          f"{', '.join(shipped_declarations())}>); {options.env.id} does not: "
+                          "use agent.group=none")
+    try:
+        checked = check_declaration(options, env, symmetry) if symmetry is not None else ""
+    finally:
+        env.close()
+    task = Task(symmetry, env.observation_space.shape[0], env.action_space.shape[0], checked)
     if agent.group is not None:
-        if task.symmetry is None:
-            raise OptionError(f"agent.group={agent.group} needs a task that declares its symmetry "
-                              f"({', '.join(TASK_ENVS)}, or env.symmetry=<a YAML file or one of "
-                              f"{', '.join(shipped_declarations())}>); {options.env.id} does not: "
-                              "use agent.group=none")
         nets = agent.networks
         try:
             _, exact = group_for_task(agent.group, task.symmetry, nets.max_frequency,

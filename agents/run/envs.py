@@ -1,9 +1,11 @@
-"""The environments of a run: a Gymnasium env from the ``env`` options, wrapped for
-TorchRL with TD-MPC's action repeat."""
+"""The environments of a run: the ``env`` options, the Gymnasium env they make, and that
+env wrapped for TorchRL with TD-MPC's action repeat."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import typing
+from dataclasses import dataclass, field
+from typing import Any
 
 import gymnasium
 import numpy as np
@@ -11,13 +13,36 @@ from torchrl.envs import GymWrapper, TransformedEnv
 from torchrl.envs.transforms import FrameSkipTransform
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
-from agents.options import OptionError
+from agents.options import OptionError, check, from_dict, option
 from geomdp_envs.declare import declare
 
-if TYPE_CHECKING:
-    from agents.run.config import EnvOptions
-
 TASK_ENVS = ("pointmass2d", "pointmass3d", "reacher")
+
+
+@dataclass
+class EnvOptions:
+    """Which env (``id``), its action repeat, the symmetry declaration of a third-party env
+    (``symmetry``: a shipped name, a YAML path or the mapping itself; see
+    ``geomdp_envs.declare``), whether that declaration is checked against the simulator
+    before training (``check_symmetry``), and the keyword arguments of ``gymnasium.make``
+    (every other key of the ``env`` section)."""
+
+    KEY: typing.ClassVar[str] = "env"
+    id: str  # no default: a config without one is an error, not PointMass2D
+    name: str = ""
+    action_repeat: int = option(1, low=1)
+    symmetry: dict[str, Any] | str | None = None
+    check_symmetry: bool = True
+    kwargs: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check(self)
+
+    @classmethod
+    def from_section(cls, section: dict[str, Any]) -> EnvOptions:
+        meta = {k: v for k, v in section.items()
+                if k in ("name", "id", "action_repeat", "symmetry", "check_symmetry")}
+        return from_dict(cls, {**meta, "kwargs": {k: v for k, v in section.items() if k not in meta}})
 
 
 def make_gym_env(env: EnvOptions, render_mode: str | None = None) -> gymnasium.Env:

@@ -12,8 +12,8 @@ from typing import IO, Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from agents.options import OptionError
-from agents.run.config import fixed_options
+from agents.options import OptionError, show
+from agents.run.config import RESUMABLE_KEYS, fixed_options
 from agents.run.nested import differences, flatten, with_added_later
 
 LOCK_FILE = "run.lock"
@@ -21,6 +21,17 @@ LOCK_FILE = "run.lock"
 
 class RunDirError(OptionError):
     """The run directory cannot hold the run (not writable, disk too full, in use)."""
+
+
+def make_run_dir(run_dir: Path) -> None:
+    """Create the run directory (and its parents), or refuse in one line: a path that
+    cannot be a directory is bad input (exit status 2), not a directory that cannot
+    hold the run."""
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OptionError(f"cannot create the run directory {run_dir} ({err.strerror}); "
+                          "choose another hydra.run.dir") from None
 
 
 def check_writable(run_dir: Path) -> None:
@@ -53,11 +64,9 @@ def check_disk_space(run_dir: Path, state_bytes: int, capacity: int, obs_size: i
 
 def check_same_options(run_dir: Path, resolved: dict[str, Any]) -> None:
     """Refuse to continue a run directory that was made with different options."""
-    saved_path = run_dir / "config.yaml"
-    if not saved_path.exists():
+    saved = _saved_options(run_dir)
+    if saved is None:
         return
-    saved = with_added_later(flatten(OmegaConf.to_container(OmegaConf.load(saved_path),
-                                                            resolve=True)))
     diffs = [f"{k}: {a!r} -> {b!r}"
              for k, a, b in differences(fixed_options(saved), fixed_options(flatten(resolved)))]
     if diffs:
@@ -65,11 +74,37 @@ def check_same_options(run_dir: Path, resolved: dict[str, Any]) -> None:
                           "use another hydra.run.dir, or the run's own options")
 
 
+def _saved_options(run_dir: Path) -> dict[str, Any] | None:
+    """The flattened options in the run directory's ``config.yaml`` (None: a new run)."""
+    saved_path = run_dir / "config.yaml"
+    if not saved_path.exists():
+        return None
+    return with_added_later(flatten(OmegaConf.to_container(OmegaConf.load(saved_path),
+                                                           resolve=True)))
+
+
+def changed_options(run_dir: Path, resolved: dict[str, Any]) -> str:
+    """The options this session changes from those the run was made with (budgets and
+    display only: ``check_same_options`` refuses the rest), e.g. ``train.steps: 3000 ->
+    6000``; empty for a new run or an unchanged rerun. ``sessions.csv`` records it."""
+    saved = _saved_options(run_dir)
+    if saved is None:
+        return ""
+    def resumable(flat: dict[str, Any]) -> dict[str, Any]:
+        return {k: v for k, v in flat.items() if k.startswith(RESUMABLE_KEYS)}
+
+    return "; ".join(f"{k}: {show(a)} -> {show(b)}" for k, a, b
+                     in differences(resumable(saved), resumable(with_added_later(flatten(resolved)))))
+
+
 def write_records(run_dir: Path, resolved: dict[str, Any], composed: DictConfig | None = None,
                   hydra: DictConfig | None = None, overrides: list[str] | None = None) -> None:
-    """The accepted run's options: ``config.yaml`` (resolved) and, from the command line,
-    Hydra's ``.hydra/`` records (Hydra's own writing is off: it would run before the
-    checks and overwrite a refused resume's records with options it never used)."""
+    """The options the run was made with: ``config.yaml`` (resolved) and, from the command
+    line, Hydra's ``.hydra/`` records, written once, when a new run is accepted (a resume
+    keeps them; what a resume changes goes to ``sessions.csv``). Hydra's own writing is
+    off: it would run before the checks and overwrite the records with options never used."""
+    if (run_dir / "config.yaml").exists():
+        return
     OmegaConf.save(OmegaConf.create(resolved), run_dir / "config.yaml")
     if composed is None:
         return

@@ -16,6 +16,7 @@ import platform
 import subprocess
 from pathlib import Path
 
+import torch
 from torchrl.record.loggers import CSVLogger, Logger, TensorboardLogger
 
 from agents.run.run_tables import EVAL_COLUMNS, SESSION_COLUMNS, TRAIN_COLUMNS, CsvTable
@@ -50,6 +51,32 @@ def _version(package: str) -> str:
         return "absent"
 
 
+def cpu_model() -> str:
+    """The CPU's model name (runs are bit-identical only on the same kind of CPU)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith(("model name", "hardware", "cpu model")):
+                return " ".join(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def session_record(env_step: int) -> dict[str, str | int]:
+    """Who runs a run from ``env_step`` on: code (commit, or GeoMDP's version from a
+    wheel), the versions of the libraries that decide its numbers, the host, its CPU
+    and torch's thread count."""
+    return {
+        "env_step": env_step,
+        "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        **code_version(), **{name: _version(name) for name in ("torch", "escnn", "torchrl")},
+        "host": platform.node(), "geomdp": _version("geomdp"),
+        **{name: _version(dist) for name, dist in (("numpy", "numpy"), ("mujoco", "mujoco"),
+                                                   ("dm_control", "dm-control"),
+                                                   ("gymnasium", "gymnasium"))},
+        "cpu": cpu_model(), "torch_threads": torch.get_num_threads()}
+
+
 class RunLog:
     """Writes the run's tables and forwards every value to TorchRL's loggers."""
 
@@ -57,23 +84,31 @@ class RunLog:
         self.run_dir = run_dir
         self.eval = CsvTable(run_dir / "eval.csv", EVAL_COLUMNS)
         self.train = CsvTable(run_dir / "train.csv", TRAIN_COLUMNS)
-        self.sessions = CsvTable(run_dir / "sessions.csv", SESSION_COLUMNS)
-        self.loggers: list[Logger] = [CSVLogger(exp_name="torchrl_csv", log_dir=str(run_dir))]
+        self.sessions = CsvTable(run_dir / "sessions.csv", SESSION_COLUMNS, grows=True)
         have_tb = importlib.util.find_spec("tensorboard") is not None
         if tensorboard is True and not have_tb:
             raise ValueError("logger.tensorboard=true but the tensorboard package is not "
                              "installed (pip install tensorboard), or use auto/false")
-        if tensorboard is True or (tensorboard == "auto" and have_tb):
-            self.loggers.append(TensorboardLogger(exp_name="tensorboard", log_dir=str(run_dir)))
+        self.tensorboard = tensorboard is True or (tensorboard == "auto" and have_tb)
+        self._loggers: list[Logger] | None = None  # made with the first row: nothing before
 
-    def record_session(self, env_step: int) -> None:
-        """Append who ran this run from ``env_step`` on: code commit, library versions, host.
+    @property
+    def loggers(self) -> list[Logger]:
+        """TorchRL's loggers (they create their folders when made)."""
+        if self._loggers is None:
+            self._loggers = [CSVLogger(exp_name="torchrl_csv", log_dir=str(self.run_dir))]
+            if self.tensorboard:
+                self._loggers.append(TensorboardLogger(exp_name="tensorboard",
+                                                       log_dir=str(self.run_dir)))
+        return self._loggers
+
+    def record_session(self, env_step: int, symmetry_check: str = "",
+                       changed_options: str = "") -> None:
+        """Append who ran this run from ``env_step`` on (``session_record``), whether the
+        task's declaration was checked, and the options changed since ``config.yaml``.
         Kept across resumes (not truncated): it is the run's provenance."""
-        self.sessions.append({
-            "env_step": env_step,
-            "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-            **code_version(), "torch": _version("torch"), "escnn": _version("escnn"),
-            "torchrl": _version("torchrl"), "host": platform.node()})
+        self.sessions.append({**session_record(env_step), "symmetry_check": symmetry_check,
+                              "changed_options": changed_options})
 
     def truncate_after(self, env_step: int) -> int:
         """Drop rows logged after ``env_step`` (-1: all), TorchRL's CSV files included;
@@ -88,7 +123,7 @@ class RunLog:
 
     def close(self) -> None:
         """Flush what TorchRL's loggers buffer (TensorBoard's event files)."""
-        for logger in self.loggers:
+        for logger in self._loggers or []:
             close = getattr(logger.experiment, "close", None)
             if isinstance(logger, TensorboardLogger) and close is not None:
                 close()

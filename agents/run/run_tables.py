@@ -16,23 +16,37 @@ class RunLogError(ValueError):
 
 
 class CsvTable:
-    """Append-only CSV with a fixed header, flushed after every row."""
+    """Append-only CSV with a fixed header, flushed after every row. Constructing one
+    writes nothing: the header is written with the first row. ``grows``: a file whose
+    header is a leading part of ``columns`` (made by a version that logged fewer
+    columns) is accepted, and rewritten with the full header at the next append."""
 
-    def __init__(self, path: Path, columns: list[str]) -> None:
+    def __init__(self, path: Path, columns: list[str], grows: bool = False) -> None:
         self.path, self.columns = path, columns
-        if not path.exists():
-            with path.open("w", newline="") as f:
-                csv.writer(f).writerow(columns)
-        else:
-            with path.open(newline="") as f:
-                header = next(csv.reader(f), [])
-            if header != columns:
-                raise RunLogError(f"{path} has other columns than this version writes "
-                                 "(made by an older version?): use another hydra.run.dir")
+        header = self.header()
+        if header is not None and header != columns and not (grows and columns[:len(header)]
+                                                              == header):
+            raise RunLogError(f"{path} has other columns than this version writes "
+                              "(made by an older version?): use another hydra.run.dir")
+
+    def header(self) -> list[str] | None:
+        """The file's header row (None: no file yet)."""
+        if not self.path.exists():
+            return None
+        with self.path.open(newline="") as f:
+            return next(csv.reader(f), [])
 
     def append(self, row: dict[str, float]) -> None:
+        if self.header() != self.columns:  # new, empty, or written with fewer columns
+            self._rewrite(self.rows() if self.path.exists() else [])
         with self.path.open("a", newline="") as f:
             csv.writer(f).writerow([row.get(c, "") for c in self.columns])
+
+    def _rewrite(self, rows: list[dict[str, str]]) -> None:
+        with self.path.open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=self.columns, restval="")
+            writer.writeheader()
+            writer.writerows(rows)
 
     def rows(self) -> list[dict[str, str]]:
         with self.path.open(newline="") as f:
@@ -40,12 +54,11 @@ class CsvTable:
 
     def truncate_after(self, env_step: int) -> int:
         """Drop rows with ``env_step`` beyond the given one; returns how many."""
+        if not self.path.exists():
+            return 0
         rows = self.rows()
         kept = [r for r in rows if int(float(r["env_step"])) <= env_step]
-        with self.path.open("w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=self.columns)
-            writer.writeheader()
-            writer.writerows(kept)
+        self._rewrite(kept)
         return len(rows) - len(kept)
 
 
@@ -62,10 +75,13 @@ TRAIN_COLUMNS = ["env_step", "agent_step", "episode", "wall_time", "updates", "l
                  "episode_reward", "steps_per_second"]
 
 
-# One row per start or resume: which code made which steps (a run resumed in another
-# session may run other code; float rounding differs between versions).
+# One row per start or resume: which code, libraries and machine made which steps (a run
+# resumed in another session may run other code; float rounding differs between versions
+# and CPUs), whether the task's declaration was checked, and the options this session
+# changed from config.yaml (budgets and display only: the rest must not change).
 SESSION_COLUMNS = ["env_step", "started", "git_commit", "git_dirty", "torch", "escnn",
-                   "torchrl", "host"]
+                   "torchrl", "host", "geomdp", "numpy", "mujoco", "dm_control", "gymnasium",
+                   "cpu", "torch_threads", "symmetry_check", "changed_options"]
 
 
 def wall_minutes(run_dir: Path) -> float | None:

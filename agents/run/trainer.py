@@ -21,11 +21,11 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs import TransformedEnv
-from tqdm import tqdm
 
 from agents.run import checkpoint, faults
 from agents.run.config import RunOptions, Task
 from agents.run.envs import make_gym_env, torchrl_env
+from agents.run.progress import Progress
 from agents.run.run_dir import check_disk_space
 from agents.run.run_log import RunLog
 from agents.run.video import frames_per_second, write_video
@@ -85,8 +85,10 @@ class Trainer:
     """TD-MPC's training loop with evaluation, logging and checkpoints."""
 
     def __init__(self, options: RunOptions, run_dir: Path, parts: Parts, log: RunLog,
-                 stop: StopRequest | None = None) -> None:
+                 stop: StopRequest | None = None,
+                 session_notes: dict[str, str] | None = None) -> None:
         self.options, self.run_dir, self.log = options, run_dir, log
+        self.session_notes = session_notes or {}  # symmetry_check, changed_options
         self.env, self.eval_env, self.eval_gym_env = parts.env, parts.eval_env, parts.eval_gym_env
         self.agent, self.buffer = parts.agent, parts.buffer
         self.stop = stop or StopRequest()
@@ -95,6 +97,7 @@ class Trainer:
         self.state = {"env_step": 0, "agent_step": 0, "episode": 0, "pending_updates": 0,
                       "wall_time": 0.0, "last_eval_step": None, "last_eval_reward": None,
                       "last_checkpoint_step": 0}
+        self.progress: Progress | None = None  # while train() runs
 
     def restore(self) -> int:
         """Continue from the run directory's checkpoint (its logs cut back to it), or
@@ -111,25 +114,12 @@ class Trainer:
             dropped = self.log.truncate_after(-1)
             if dropped:
                 print(f"starting {self.run_dir} over (no checkpoint; dropped {dropped} log rows)")
-        state_bytes = 4 * sum(p.numel() * p.element_size() for p in self.agent.model.parameters())
-        check_disk_space(self.run_dir, state_bytes, self.options.agent.replay.capacity,
+        check_disk_space(self.run_dir, self.agent.checkpoint_bytes(), self.options.agent.replay.capacity,
                          self.agent.observation_size, self.agent.action_size)
-        self.log.record_session(self.state["env_step"])
+        self.log.record_session(self.state["env_step"], **self.session_notes)
         return self.state["env_step"]
 
     # acting
-    def random_action(self) -> torch.Tensor:
-        """A uniform action in the agent's action domain (unit ball per vector field)."""
-        out = []
-        for f in self.agent.action_fields:
-            if f.size == 1:
-                out.append(torch.rand(1, generator=self.agent.generator) * 2 - 1)
-            else:
-                v = torch.randn(f.size, generator=self.agent.generator)
-                radius = torch.rand(1, generator=self.agent.generator) ** (1 / f.size)
-                out.append(v / v.norm() * radius)
-        return torch.cat(out)
-
     def policy(self, explore: bool, random: bool, frames: list[np.ndarray] | None = None,
                phase: str = "acting") -> TensorDictModule:
         """The acting policy for one episode: random warm-up actions, or the planner;
@@ -143,17 +133,19 @@ class Trainer:
             if frames is not None:
                 frames.append(self.eval_gym_env.render())
             if random:
-                action = self.random_action()
+                action = self.agent.random_action()
             else:
                 action = self.agent.act(observation, step[0], explore=explore)
             step[0] += 1
+            if self.progress is not None and phase != "evaluation":
+                self.progress.advance(self.action_repeat)
             return action.to(torch.float32).cpu()
 
         return TensorDictModule(act, in_keys=["observation"], out_keys=["action"])
 
     def episode(self, env: TransformedEnv, seed: int, explore: bool, random: bool,
                 frames: list[np.ndarray] | None = None, phase: str = "acting") -> TensorDictBase:
-        self.agent.planner.reset()
+        self.agent.start_episode()
         env.set_seed(seed)
         td = env.rollout(max_steps=10**9, policy=self.policy(explore, random, frames, phase),
                          break_when_any_done=True, auto_reset=True)
@@ -171,12 +163,19 @@ class Trainer:
         states with the training noise: a policy that only works with noise shows here."""
         frames: list[np.ndarray] | None = [] if self.record_video() else None
 
+        train = self.options.train
+        episodes = train.eval_episodes + train.eval_noisy_episodes
+
         def returns(n: int, explore: bool) -> list[float]:
-            return [float(self.episode(self.eval_env, 10**6 + 1000 * self.options.seed + i,
-                                       explore=explore, random=False,
-                                       frames=frames if i == 0 and not explore else None,
-                                       phase="evaluation")["next", "reward"].sum())
-                    for i in range(n)]
+            out = []
+            for i in range(n):
+                if self.progress is not None:
+                    self.progress.evaluating(i + (train.eval_episodes if explore else 0), episodes)
+                out.append(float(self.episode(self.eval_env, 10**6 + 1000 * self.options.seed + i,
+                                              explore=explore, random=False,
+                                              frames=frames if i == 0 and not explore else None,
+                                              phase="evaluation")["next", "reward"].sum()))
+            return out
 
         plain = returns(self.options.train.eval_episodes, explore=False)
         if frames:
@@ -191,6 +190,8 @@ class Trainer:
             "noisy_episode_reward": np.mean(noisy) if noisy else float("nan"),
             "noisy_episode_reward_std": np.std(noisy) if noisy else float("nan"),
             "noisy_eval_episodes": len(noisy)})
+        if self.progress is not None:
+            self.progress.evaluated(self.state["env_step"], self.state["last_eval_reward"])
 
     def _counters(self) -> dict[str, float]:
         return {k: self.state[k] for k in ("env_step", "agent_step", "episode", "wall_time")}
@@ -211,13 +212,22 @@ class Trainer:
         return totals
 
     def train(self) -> None:
+        cfg, state = self.options.train, self.state
+        self.progress = Progress(cfg.steps, state["env_step"], cfg.eval_every,
+                                 state["last_eval_step"], cfg.progress)
+        try:
+            self._train()
+        finally:
+            self.progress.close()
+            self.progress = None
+
+    def _train(self) -> None:
         cfg, state, seed = self.options.train, self.state, self.options.seed
-        bar = tqdm(total=cfg.steps, initial=state["env_step"], unit="step", disable=not cfg.progress,
-                   dynamic_ncols=True, desc="env steps")
         if state["last_eval_step"] is None:
             self.evaluate()
         while state["env_step"] < cfg.steps:
             start = time.perf_counter()
+            self.progress.episode_started()
             random = state["env_step"] < cfg.seed_steps
             td = self.episode(self.env, 1000 * seed + state["episode"], explore=True, random=random)
             length = td.shape[0]
@@ -229,10 +239,12 @@ class Trainer:
             state["pending_updates"] += length * cfg.updates_per_step
             metrics = {}
             if state["env_step"] >= cfg.seed_steps:
+                self.progress.updating(state["pending_updates"])
                 metrics = self.update(state["pending_updates"])
                 metrics["updates"] = state["pending_updates"]
                 metrics["target_lag"] = self.agent.target_lag()
                 state["pending_updates"] = 0
+            self.progress.episode_done(length * self.action_repeat)
             elapsed = time.perf_counter() - start
             state["wall_time"] += elapsed
             self.log.log("train", {**self._counters(), **metrics,
@@ -247,6 +259,3 @@ class Trainer:
                     or state["env_step"] >= cfg.steps):
                 state["last_checkpoint_step"] = state["env_step"]
                 checkpoint.save(self.run_dir, self.agent, self.buffer, state, self.checkpoint_options)
-            bar.update(length * self.action_repeat)
-            bar.set_postfix(eval_return=f"{state['last_eval_reward']:.1f}")
-        bar.close()

@@ -10,27 +10,27 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.objectives import SoftUpdate
 
-from agents.compat.escnn import is_basis_expansion_key
-from agents.nn.layers import expansion_scope
+from agents.compat.escnn import is_basis_expansion_key, is_linear_buffer
+from agents.nn.escnn_groups import GROUP_NAMES
+from agents.nn.expansion import expansion_scope
 from agents.nn.networks import Architecture, Equivariance, NetworkConfig, build_networks
 from agents.nn.spectral import GridActivation
 from agents.options import OptionError, check, from_dict, key, option
-from agents.tdmpc.augmentation import SliceAugmentation
+from agents.tdmpc.augmentation import SliceAugmentation, is_augmentation_group_name
 from agents.tdmpc.loss import LossConfig, TDMPCLoss
 from agents.tdmpc.planner import MPPIPlanner, NoiseSource, PlannerConfig
 from agents.tdmpc.replay import ReplayConfig
 from agents.tdmpc.world_model import WorldModel
 from geomdp_envs.symmetry import Symmetry
 
-# escnn's buffers in every equivariant layer (``EquivariantLinear.layer``): the basis,
-# the bias's change of basis, and its eval-mode expansion caches, which this code
-# never uses. All are rebuilt with the networks, and they are most of an agent's bytes.
-ESCNN_BUFFERS = ("matrix", "expanded_bias", "bias_expansion")
-
 
 def rebuilt_with_networks(key: str) -> bool:
-    """Whether a state-dict entry is one of escnn's rebuildable buffers (not saved)."""
-    return is_basis_expansion_key(key) or (".layer." in key and key.rsplit(".", 1)[-1] in ESCNN_BUFFERS)
+    """Whether a state-dict entry is one of escnn's rebuildable buffers (not saved): in
+    every equivariant layer (``EquivariantLinear.layer``), the basis, the bias's change of
+    basis, and its eval-mode expansion caches, which this code never uses. All are
+    rebuilt with the networks, and they are most of an agent's bytes. Their names are
+    escnn's (``agents.compat.escnn``)."""
+    return is_basis_expansion_key(key) or (".layer." in key and is_linear_buffer(key.rsplit(".", 1)[-1]))
 
 
 @dataclass
@@ -76,6 +76,9 @@ class TDMPCConfig(Equivariance):
 
     def __post_init__(self) -> None:
         Equivariance.__post_init__(self)
+        if self.augment not in ("none", "auto") and not is_augmentation_group_name(self.augment):
+            raise OptionError(f"{key(TDMPCConfig, 'augment')}={self.augment!r}; valid: none, "
+                              f"auto, or a group ({GROUP_NAMES}; the task decides which apply)")
         if self.replay.capacity < self.batch_size * self.horizon:
             raise OptionError(f"{key(ReplayConfig, 'capacity')} ({self.replay.capacity}) must hold "
                               f"at least one batch of slices (batch_size x horizon = "
@@ -116,7 +119,7 @@ class TDMPCAgent:
         policy_ids = {id(p) for p in policy_params}
         # Fused Adam: one kernel over all parameters (the per-parameter loop's dispatch
         # dominates at these sizes). Writes that bypass version counters are harmless:
-        # nothing here caches on them (see agents.nn.layers.expansion_scope).
+        # nothing here caches on them (see agents.nn.expansion.expansion_scope).
         self.model_optimizer = torch.optim.Adam(
             [p for p in self.model.parameters() if id(p) not in policy_ids], lr=config.lr,
             fused=True)
@@ -129,6 +132,30 @@ class TDMPCAgent:
         # its own stream: the agent's generator (warm-up actions, planner noise) has ``seed``
         self.augmentation = (None if config.augment == "none"
                              else SliceAugmentation(config.augment, symmetry, seed + AUGMENT_SEED))
+
+    def random_action(self) -> torch.Tensor:
+        """A uniform action of the agent's action domain (unit ball per vector field), the
+        warm-up's, from the agent's own generator: checkpointed with it, so a resumed
+        warm-up draws what an uninterrupted one would (``Symmetry.sample_action`` is the
+        same distribution from a numpy generator, for code without an agent)."""
+        out = []
+        for f in self.action_fields:
+            if f.size == 1:
+                out.append(torch.rand(1, generator=self.generator) * 2 - 1)
+            else:
+                v = torch.randn(f.size, generator=self.generator)
+                radius = torch.rand(1, generator=self.generator) ** (1 / f.size)
+                out.append(v / v.norm() * radius)
+        return torch.cat(out)
+
+    def start_episode(self) -> None:
+        """Forget the planner's warm start: a new episode's first plan starts afresh."""
+        self.planner.reset()
+
+    def checkpoint_bytes(self) -> int:
+        """About what a checkpoint of the agent holds: the parameters four times (online,
+        target, and the optimisers' two moments); what disk checks budget for."""
+        return 4 * sum(p.numel() * p.element_size() for p in self.model.parameters())
 
     def horizon(self, step: int) -> int:
         return int(round(self.horizon_schedule(step)))
@@ -175,7 +202,7 @@ class TDMPCAgent:
         (losses["loss_model"] + losses["loss_pi"]).backward()
         clip = self.config.grad_clip_norm
         # The optimisers' parameter lists, not ``Module.parameters()``: walking an escnn
-        # network's modules is slow (``agents.nn.layers.submodules``).
+        # network's modules is slow (``agents.nn.parameters.submodules``).
         model_grad, policy_grad = (torch.nn.utils.clip_grad_norm_(
             [p for g in optimizer.param_groups for p in g["params"]], clip, foreach=True)
             for optimizer in (self.model_optimizer, self.policy_optimizer))
@@ -217,8 +244,10 @@ class TDMPCAgent:
         when the target tracks the online network, growing if it stopped moving."""
         online = list(self.model.parameters())
         target = list(self.loss.target_model.parameters())  # a deep copy: the same order
-        gap = torch.stack(torch._foreach_norm(torch._foreach_sub(online, target))).norm()
-        return float(gap / torch.stack(torch._foreach_norm(online)).norm())
+        # torch's total norm: the 2-norm of the per-tensor 2-norms (foreach kernels), the
+        # same floating-point operations in the same order as before (tests/test_compat.py)
+        gap = torch.nn.utils.get_total_norm([o - t for o, t in zip(online, target)], foreach=True)
+        return float(gap / torch.nn.utils.get_total_norm(online, foreach=True))
 
     def state_dict(self) -> dict[str, Any]:
         networks = {k: v for k, v in self.loss.state_dict().items() if not rebuilt_with_networks(k)}

@@ -22,6 +22,15 @@ from geomdp_envs.symmetry import Symmetry
 from geomdp_envs.torchrl_augment import SymmetryAugment
 
 
+def is_augmentation_group_name(name: str) -> bool:
+    """Whether ``agent.augment=<name>`` names a group at all (the task decides if it fits)."""
+    try:
+        groups.group_dim(CONTINUOUS_GROUPS.get(name, (name,))[0])
+    except ValueError:
+        return False
+    return True
+
+
 def augmentation_group(name: str, symmetry: Symmetry | None) -> str:
     """The group ``agent.augment=<name>`` draws from: ``auto`` is the largest subgroup of
     the task's exact group that keeps every action in its domain (box actions in the box,
