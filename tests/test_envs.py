@@ -109,6 +109,7 @@ def test_headless_rgb_array_rendering(config):
     env.close()
 
 
+@pytest.mark.slow
 def test_make_with_module_prefix_registers_without_import():
     code = ("import gymnasium; e = gymnasium.make('geomdp_envs:GeoMDP/PointMass3D-v0', n_balls=3);"
             "print(e.observation_space.shape)")
