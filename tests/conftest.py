@@ -36,3 +36,18 @@ def randomise_heads():
         return networks
 
     return randomise
+
+
+# The quick subset (pytest -m "not slow") keeps every test, each with the small groups;
+# the sweeps over the large or continuous groups (each case seconds to a minute on CPU)
+# run in the full suite only, with the tests marked slow in their files (training runs,
+# subprocesses, the wheel).
+LARGE_GROUPS = ("icosahedral", "octahedral", "C16", "D16", "SO2", "O2", "SO3", "O3")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        params = getattr(item, "callspec", None)
+        if params is not None and any(isinstance(v, str) and v in LARGE_GROUPS
+                                      for v in params.params.values()):
+            item.add_marker(pytest.mark.slow)

@@ -99,6 +99,7 @@ def test_lqr_oracle_solves_pointmass2d():
     assert mean > 800
 
 
+@pytest.mark.slow  # computes every table of the report
 def test_theory_report_command_runs(capsys):
     from agents.cli import theory as theory_report
 
