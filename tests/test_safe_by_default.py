@@ -131,7 +131,8 @@ def test_the_declaration_is_recorded_by_its_contents(tmp_path, capsys):
 
 
 def test_a_run_log_is_written_only_when_rows_come(tmp_path):
-    RunLog(tmp_path, tensorboard=False)
+    log = RunLog(tmp_path, tensorboard=False)
+    assert log.eval.rows() == [] and log.truncate_after(-1) == 0  # readable before any row
     assert [p.name for p in tmp_path.iterdir()] == []
 
 

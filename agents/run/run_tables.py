@@ -38,7 +38,7 @@ class CsvTable:
 
     def append(self, row: dict[str, float]) -> None:
         if self.header() != self.columns:  # new, empty, or written with fewer columns
-            self._rewrite(self.rows() if self.path.exists() else [])
+            self._rewrite(self.rows())
         with self.path.open("a", newline="") as f:
             csv.writer(f).writerow([row.get(c, "") for c in self.columns])
 
@@ -49,13 +49,16 @@ class CsvTable:
             writer.writerows(rows)
 
     def rows(self) -> list[dict[str, str]]:
+        """The rows written so far (none before the first)."""
+        if not self.path.exists():
+            return []
         with self.path.open(newline="") as f:
             return list(csv.DictReader(f))
 
     def truncate_after(self, env_step: int) -> int:
         """Drop rows with ``env_step`` beyond the given one; returns how many."""
         if not self.path.exists():
-            return 0
+            return 0  # nothing written: nothing to drop, and nothing to create
         rows = self.rows()
         kept = [r for r in rows if int(float(r["env_step"])) <= env_step]
         self._rewrite(kept)
