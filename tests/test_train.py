@@ -110,21 +110,22 @@ def test_killed_run_resumes_to_the_same_result(tmp_path, uninterrupted, agent, k
 
 @pytest.mark.slow
 def test_sigterm_stops_at_a_safe_point_with_one_line(tmp_path):
-    """SIGTERM during an equivariant run's updates: the loop stops between updates, with
-    one line and no traceback; the same command then finishes the run."""
+    """SIGTERM during an equivariant run's second episode (planning or its updates): the
+    loop stops at a safe point, with one line naming the checkpoint it keeps and no
+    traceback; the same command then finishes the run."""
     args = [*TINY, "agent.group=D8", f"hydra.run.dir={tmp_path}"]
     proc = subprocess.Popen([*TRAIN, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
-    train_csv = tmp_path / "train.csv"
+    state = tmp_path / "checkpoint" / "state.json"
     deadline = time.time() + 180
-    while not (train_csv.exists() and len(train_csv.read_text().splitlines()) >= 2):
+    while not state.exists():  # the first episode, its updates and evaluation are done
         assert proc.poll() is None and time.time() < deadline, proc.communicate()
         time.sleep(0.05)
-    time.sleep(0.3)  # inside the first round of updates
+    time.sleep(0.3)  # inside the second episode
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130 and "Traceback" not in err, err
-    assert "run the same command to continue" in err
+    assert "the last checkpoint is at env step 1000: run the same command to continue" in err, err
     finished = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300)
     assert finished.returncode == 0, finished.stderr[-2000:]
 
