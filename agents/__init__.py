@@ -19,17 +19,19 @@ _EXPORTS = {
     "AgentGroup": "agents.nn.escnn_groups", "field_type": "agents.nn.escnn_groups",
     "group_for_task": "agents.nn.escnn_groups", "make_group": "agents.nn.escnn_groups",
     "valid_groups": "agents.nn.escnn_groups",
-    "NetworkConfig": "agents.nn.networks", "Networks": "agents.nn.networks",
+    "Architecture": "agents.nn.networks", "NetworkConfig": "agents.nn.networks",
+    "Networks": "agents.nn.networks",
     "build_networks": "agents.nn.networks", "project": "agents.nn.networks",
     "squash": "agents.nn.networks",
     "TDMPCAgent": "agents.tdmpc.agent", "TDMPCConfig": "agents.tdmpc.agent",
 }
-__all__ = ["AgentGroup", "NetworkConfig", "Networks", "TDMPCAgent", "TDMPCConfig", "build_networks",
-           "field_type", "group_for_task", "make_group", "project", "squash", "valid_groups"]
+__all__ = ["AgentGroup", "Architecture", "NetworkConfig", "Networks", "TDMPCAgent", "TDMPCConfig",
+           "build_networks", "field_type", "group_for_task", "make_group", "project", "squash",
+           "valid_groups"]
 
 if TYPE_CHECKING:
     from agents.nn.escnn_groups import AgentGroup, field_type, group_for_task, make_group, valid_groups
-    from agents.nn.networks import NetworkConfig, Networks, build_networks, project, squash
+    from agents.nn.networks import Architecture, NetworkConfig, Networks, build_networks, project, squash
     from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
 
 

@@ -27,7 +27,7 @@ import torch
 from timing import best_time
 
 import geomdp_envs  # noqa: F401
-from agents import NetworkConfig, build_networks
+from agents import Architecture, NetworkConfig, build_networks
 from agents.nn.layers import EquivariantLinear
 from agents.nn.layout import layout_size
 
@@ -76,15 +76,15 @@ def main() -> None:
           "(x plain) | inference fwd @512 (x plain) | GFLOP/s equivariant / plain |")
     print("|---|---|---|---|---|---|---|")
     plain_cache = {}
+    sizes = Architecture(hidden_dim=args.width, latent_dim=args.latent)
     for group, dim in GROUPS:
         sym = gymnasium.make(TASKS[dim][0], **TASKS[dim][1]).unwrapped.symmetry
         if dim not in plain_cache:
-            cfg = NetworkConfig(hidden_dim=args.width, latent_dim=args.latent)
+            cfg = NetworkConfig(networks=sizes)
             plain_cache[dim] = measure(build_networks(cfg, sym).dynamics)
         plain = plain_cache[dim]
         for strategy in ("sqrt", "linear"):
-            cfg = NetworkConfig(group=group, width_strategy=strategy, hidden_dim=args.width,
-                                latent_dim=args.latent)
+            cfg = NetworkConfig(group=group, width_strategy=strategy, networks=sizes)
             eq = measure(build_networks(cfg, sym).dynamics)
             print(f"| {group} | {strategy} | {eq['hidden']} (plain {plain['hidden']}) "
                   f"| {eq['params']:,} ({eq['params'] / plain['params']:.2f}) "

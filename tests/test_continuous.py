@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from agents import NetworkConfig, build_networks, group_for_task, make_group
+from agents import Architecture, NetworkConfig, build_networks, group_for_task, make_group
 from agents.nn.spectral import GridActivation, SpectralLayerNorm, sampling_matrix
 from geomdp_envs import groups
 from tests.test_planner import RecordingNoise, TransformedNoise, plan_twice
@@ -43,7 +43,7 @@ def equivariance_error(net, elements, seed=0):
 
 def networks(group_name, randomise_heads, **options):
     nets = build_networks(NetworkConfig(group=group_name, allow_approximate=True,
-                                        **{**SMALL, **options}), declaration(group_name))
+                                        networks=Architecture(**SMALL, **options)), declaration(group_name))
     randomise_heads(nets)
     for module in nets.modules().values():
         module.double()
@@ -121,7 +121,7 @@ def test_rotations_that_map_the_grid_to_itself_are_exact(randomise_heads):
 
 def test_hidden_layers_use_band_limited_fields_and_comparable_widths():
     sym = declaration("SO2")
-    cfg = dict(hidden_dim=128, latent_dim=32, hidden_layers=2, allow_approximate=True)
+    cfg = dict(allow_approximate=True, networks=Architecture(hidden_dim=128, latent_dim=32, hidden_layers=2))
     plain = build_networks(NetworkConfig(**cfg), sym).parameter_counts()["dynamics"]
     sqrt = build_networks(NetworkConfig(group="SO2", width_strategy="sqrt", **cfg), sym)
     linear = build_networks(NetworkConfig(group="SO2", width_strategy="linear", **cfg), sym)
@@ -178,7 +178,7 @@ def test_continuous_group_names_and_options_are_checked():
     assert not group_for_task("O2", pm2)[1]  # the walls keep only D4
     with pytest.raises(ValueError, match="only an approximate symmetry of this task \\(exact "
                                          "group: D4\\); set agent.allow_approximate=true"):
-        build_networks(NetworkConfig(group="O2", **SMALL), pm2)
+        build_networks(NetworkConfig(group="O2", networks=Architecture(**SMALL)), pm2)
     with pytest.raises(ValueError, match="acts in 3D but the task is 2D; valid groups for this "
                                          "task: C4, C8, C16, D4, D8, D16, SO2, O2"):
         group_for_task("SO3", pm2)

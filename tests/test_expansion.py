@@ -20,7 +20,7 @@ from escnn import nn as enn
 from tensordict import TensorDict
 from torchrl.objectives import SoftUpdate
 
-from agents import NetworkConfig, build_networks
+from agents import Architecture, NetworkConfig, build_networks
 from agents.nn.expansion import ScopedExpansion, expansion_scope
 from agents.nn.layers import EquivariantLinear
 from agents.nn.parameters import detached_parameters, parameter_slots
@@ -38,7 +38,7 @@ def pointmass2d():
 
 def dynamics_net(group="D8", seed=0):
     torch.manual_seed(seed)
-    return build_networks(NetworkConfig(group=group, **SMALL), pointmass2d()).dynamics
+    return build_networks(NetworkConfig(group=group, networks=Architecture(**SMALL)), pointmass2d()).dynamics
 
 
 def fresh_forward(net, x):
@@ -164,7 +164,7 @@ def test_soft_update_moves_the_target_network_the_loss_uses():
 def test_soft_update_through_torchrl_alone():
     """TorchRL's SoftUpdate writes with ``.data.lerp_``; the target follows."""
     sym = pointmass2d()
-    nets = build_networks(NetworkConfig(group="D4", **SMALL), sym)
+    nets = build_networks(NetworkConfig(group="D4", networks=Architecture(**SMALL)), sym)
     loss = TDMPCLoss(WorldModel(nets, sym.action), LossConfig())
     updater = SoftUpdate(loss, tau=0.5)
     x = torch.randn(8, loss.target_model.encoder.in_layout.size)
@@ -259,7 +259,8 @@ def test_detached_parameters_freeze_every_layer_kind(group, layers):
     (nn.Linear, EquivariantLinear, FourierLinear, FieldLayerNorm, SpectralLayerNorm);
     on exit its own Parameter objects are back and gradients reach them again."""
     torch.manual_seed(0)
-    config = NetworkConfig(group=group, layers=layers, allow_approximate=True, **SMALL)
+    config = NetworkConfig(group=group, allow_approximate=True,
+                           networks=Architecture(layers=layers, **SMALL))
     net = build_networks(config, pointmass2d()).qs[0]
     with torch.no_grad():
         for p in net.parameters():  # the output layer starts at zero

@@ -12,7 +12,7 @@ import torch
 import torch.nn.functional as F
 from tensordict import TensorDict
 
-from agents import NetworkConfig, build_networks
+from agents import Architecture, NetworkConfig, build_networks
 from agents.nn.expansion import expansion_scope
 from agents.tdmpc.loss import LossConfig, TDMPCLoss
 from agents.tdmpc.world_model import WorldModel
@@ -23,8 +23,8 @@ BATCH, HORIZON = 16, 4
 def make_loss(group: str) -> TDMPCLoss:
     symmetry = gymnasium.make("GeoMDP/PointMass2D-v0").unwrapped.symmetry
     torch.manual_seed(0)
-    networks = build_networks(NetworkConfig(group=group, hidden_dim=32, latent_dim=16,
-                                            hidden_layers=2), symmetry)
+    networks = build_networks(NetworkConfig(group=group, networks=Architecture(
+        hidden_dim=32, latent_dim=16, hidden_layers=2)), symmetry)
     model = WorldModel(networks, symmetry.action)
     loss = TDMPCLoss(model, LossConfig())
     with torch.no_grad():  # a target that differs from the online model

@@ -1,18 +1,20 @@
 """Equivariance of the networks built from the declarations, per group and per head."""
 
+from dataclasses import replace
+
 import gymnasium
 import numpy as np
 import pytest
 import torch
 
-from agents import NetworkConfig, build_networks, group_for_task, make_group, squash
+from agents import Architecture, NetworkConfig, build_networks, group_for_task, make_group, squash
 from agents.nn.layers import EquivariantLinear, FieldLayerNorm
 from agents.nn.networks import project
 from agents.nn.parameters import submodules
 from geomdp_envs import groups
 from geomdp_envs.declare import declare
 
-SMALL = dict(hidden_dim=24, latent_dim=16, hidden_layers=2)
+SMALL = Architecture(hidden_dim=24, latent_dim=16, hidden_layers=2)
 TASKS_2D = {"pointmass2d": ("GeoMDP/PointMass2D-v0", {}),
             "reacher": ("GeoMDP/Reacher-v0", {})}
 TASK_3D = ("GeoMDP/PointMass3D-v0", {"n_balls": 2})
@@ -58,7 +60,7 @@ def test_every_network_is_equivariant_for_every_group_element(group_name, task, 
                                                             randomise_heads):
     sym = task_symmetry(task)
     nets = randomise_heads(build_networks(
-        NetworkConfig(group=group_name, width_strategy=strategy, **SMALL), sym))
+        NetworkConfig(group=group_name, width_strategy=strategy, networks=SMALL), sym))
     torch.manual_seed(0)
     heads = {"encoder": nets.encoder, "dynamics": nets.dynamics, "reward": nets.reward,
              "q0": nets.qs[0], "q1": nets.qs[1], "policy": nets.policy}
@@ -81,7 +83,7 @@ def test_reward_is_invariant_inside_the_group_and_not_outside(group_name, task, 
                                                              randomise_heads):
     """r(h(g.o), g.a) = r(h(o), a), through the declared observation and action maps."""
     sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
-    nets = randomise_heads(build_networks(NetworkConfig(group=group_name, **SMALL), sym))
+    nets = randomise_heads(build_networks(NetworkConfig(group=group_name, networks=SMALL), sym))
     torch.manual_seed(1)
     obs, act = torch.randn(64, sym.observation_size), torch.randn(64, sym.action_size)
 
@@ -103,7 +105,7 @@ def test_declared_fields_become_the_matching_escnn_representations():
     sym = declaration(*TASKS_2D["reacher"])
     group, exact = group_for_task("D8", sym)
     assert exact
-    nets = build_networks(NetworkConfig(group="D8", **SMALL), sym)
+    nets = build_networks(NetworkConfig(group="D8", networks=SMALL), sym)
     for e in group.elements():
         g = group.element_matrix(e)
         np.testing.assert_allclose(nets.encoder.in_layout.representation(e),
@@ -130,18 +132,18 @@ def test_exactness_and_bad_groups():
     with pytest.raises(ValueError, match="unknown group 'SO\\(5\\)'; valid groups for this 2D"):
         group_for_task("SO(5)", pm2)
     with pytest.raises(ValueError, match="equivariant latent"):
-        build_networks(NetworkConfig(group="D4", equivariant={"transition": False}, **SMALL), pm2)
+        build_networks(NetworkConfig(group="D4", equivariant={"transition": False}, networks=SMALL), pm2)
     with pytest.raises(ValueError, match="width_strategy='cube'; valid: sqrt, linear"):
         NetworkConfig(width_strategy="cube")
 
 
 def test_plain_networks_have_the_same_interface_and_mix_with_equivariant_ones():
     sym = declaration("GeoMDP/PointMass2D-v0", {})
-    plain = build_networks(NetworkConfig(group=None, **SMALL), sym)
+    plain = build_networks(NetworkConfig(group=None, networks=SMALL), sym)
     assert all(isinstance(m, torch.nn.Linear) for m in plain.encoder.modules()
                if isinstance(m, (torch.nn.Linear, EquivariantLinear)))
     assert plain.encoder(torch.randn(5, 4)).shape == (5, 16)
-    mixed = build_networks(NetworkConfig(group="D8", equivariant={"q": False}, **SMALL), sym)
+    mixed = build_networks(NetworkConfig(group="D8", equivariant={"q": False}, networks=SMALL), sym)
     z = mixed.encoder(torch.randn(5, 4))
     assert mixed.qs[0](torch.cat([z, torch.randn(5, 2)], -1)).shape == (5, 1)
     assert not any(isinstance(m, EquivariantLinear) for m in mixed.qs.modules())
@@ -149,10 +151,10 @@ def test_plain_networks_have_the_same_interface_and_mix_with_equivariant_ones():
 
 def test_width_strategies_and_parameter_counts():
     sym = declaration("GeoMDP/PointMass2D-v0", {})
-    cfg = dict(hidden_dim=128, latent_dim=32, hidden_layers=2)
-    plain = build_networks(NetworkConfig(**cfg), sym).parameter_counts()
-    sqrt = build_networks(NetworkConfig(group="D8", width_strategy="sqrt", **cfg), sym)
-    linear = build_networks(NetworkConfig(group="D8", width_strategy="linear", **cfg), sym)
+    sizes = Architecture(hidden_dim=128, latent_dim=32, hidden_layers=2)
+    plain = build_networks(NetworkConfig(networks=sizes), sym).parameter_counts()
+    sqrt = build_networks(NetworkConfig(group="D8", width_strategy="sqrt", networks=sizes), sym)
+    linear = build_networks(NetworkConfig(group="D8", width_strategy="linear", networks=sizes), sym)
     assert sqrt.encoder.net[0].out_type.size == round(128 / 4) * 16  # 32 copies of a 16-dim field
     assert linear.encoder.net[0].out_type.size == 128  # 8 copies: the plain width
     ratio_sqrt = sqrt.parameter_counts()["dynamics"] / plain["dynamics"]
@@ -163,7 +165,7 @@ def test_width_strategies_and_parameter_counts():
 
 def test_inference_form_equals_training_form_and_is_never_stale():
     sym = declaration(*TASK_3D)
-    nets = build_networks(NetworkConfig(group="octahedral", **SMALL), sym)
+    nets = build_networks(NetworkConfig(group="octahedral", networks=SMALL), sym)
     net = nets.dynamics
     x = torch.randn(16, net.in_layout.size)
     trained = net(x)  # gradients on: escnn expands the weights in the graph
@@ -239,8 +241,8 @@ def test_networks_do_not_share_escnn_buffers():
     """escnn shares basis modules between layers; .double() on one network must not
     reach another built for the same group."""
     sym = declaration("GeoMDP/PointMass2D-v0", {})
-    a = build_networks(NetworkConfig(group="D4", **SMALL), sym)
-    b = build_networks(NetworkConfig(group="D4", **SMALL), sym)
+    a = build_networks(NetworkConfig(group="D4", networks=SMALL), sym)
+    b = build_networks(NetworkConfig(group="D4", networks=SMALL), sym)
     a.encoder.double()
     assert b.encoder(torch.randn(3, 4)).dtype == torch.float32
     assert a.encoder(torch.randn(3, 4, dtype=torch.float64)).dtype == torch.float64
@@ -252,7 +254,7 @@ def test_swapped_in_parameters_are_the_ones_used():
     from tensordict import TensorDict
 
     sym = declaration(*TASK_3D)
-    config = NetworkConfig(group="octahedral", **SMALL)
+    config = NetworkConfig(group="octahedral", networks=SMALL)
     net, other = build_networks(config, sym).dynamics, build_networks(config, sym).dynamics
     x = torch.randn(8, net.in_layout.size, requires_grad=True)
     own, expected = net(x).detach(), other(x).detach()
@@ -289,14 +291,15 @@ def test_encoder_keeps_the_magnitude_of_vector_observations(group_name, task, st
     the LayerNorm after it must not divide out |obs|. Scaling an observation must
     move the latent state at least as much as it moves the plain encoder's."""
     sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
-    cfg = dict(hidden_dim=128, latent_dim=32, hidden_layers=2, width_strategy=strategy)
+    sizes = Architecture(hidden_dim=128, latent_dim=32, hidden_layers=2)
     directions = torch.randn(64, sym.observation_size, generator=torch.Generator().manual_seed(0))
     directions = directions / directions.norm(dim=-1, keepdim=True)
     for small, large in ((1e-3, 1e-2), (0.05, 0.1), (0.2, 0.4)):
         changes = {}
         for name in (None, group_name):
             torch.manual_seed(0)
-            encoder = build_networks(NetworkConfig(group=name, **cfg), sym).encoder
+            config = NetworkConfig(group=name, width_strategy=strategy, networks=sizes)
+            encoder = build_networks(config, sym).encoder
             changes[name] = relative_latent_change(encoder, directions, small, large)
         assert changes[group_name] >= 0.5 * changes[None], (small, large, changes)
 
@@ -311,7 +314,7 @@ def test_gradients_are_finite_with_states_exactly_on_target(group_name, task):
     from agents.tdmpc.world_model import WorldModel
 
     sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
-    nets = build_networks(NetworkConfig(group=group_name, **SMALL), sym)
+    nets = build_networks(NetworkConfig(group=group_name, networks=SMALL), sym)
     loss = TDMPCLoss(WorldModel(nets, sym.action), LossConfig())
     n, horizon = 8, 3
     obs = torch.randn(n, horizon, sym.observation_size) * 0.1
@@ -337,8 +340,8 @@ def test_irrep_basis_layers_give_the_same_networks_as_dense_ones(group_name, tas
     sym = declaration(*TASK_3D) if task == "pointmass3d" else declaration(*TASKS_2D[task])
     counts = {}
     for kind in ("dense", "fourier"):
-        nets = randomise_heads(build_networks(
-            NetworkConfig(group=group_name, width_strategy="sqrt", layers=kind, **SMALL), sym))
+        config = NetworkConfig(group=group_name, width_strategy="sqrt", networks=replace(SMALL, layers=kind))
+        nets = randomise_heads(build_networks(config, sym))
         counts[kind] = nets.parameter_counts()
         uses_fourier = any(isinstance(m, FourierLinear) for m in nets.dynamics.modules())
         assert uses_fourier == (kind == "fourier")
@@ -358,7 +361,7 @@ def test_submodules_walks_like_modules(group):
     ``Module.modules()``, in its order, shared modules once."""
     sym = declaration(*TASK_3D) if group in ("icosahedral", "SO3") else declaration(
         *TASKS_2D["pointmass2d"])
-    nets = build_networks(NetworkConfig(group=group, width_strategy="linear", **SMALL), sym)
+    nets = build_networks(NetworkConfig(group=group, width_strategy="linear", networks=SMALL), sym)
     shared = torch.nn.ModuleList([nets.encoder, nets.qs, nets.encoder])
     for module in [*nets.modules().values(), shared]:
         assert [id(m) for m in submodules(module)] == [id(m) for m in module.modules()]

@@ -3,7 +3,7 @@ unknown and missing keys, nested sections, and the key each message names."""
 
 import pytest
 
-from agents.nn.networks import NetworkConfig
+from agents.nn.networks import Architecture, NetworkConfig, build_networks
 from agents.options import OptionError, from_dict
 from agents.run.config import EnvOptions, RunOptions
 from agents.tdmpc.agent import TDMPCConfig
@@ -12,7 +12,7 @@ from agents.tdmpc.replay import ReplayConfig
 
 @pytest.mark.parametrize("build, message", [
     # the key is the declaring dataclass's KEY, whether built from a config or in Python
-    (lambda: NetworkConfig(latent_dim=0), "agent.networks.latent_dim must be >= 1, got 0"),
+    (lambda: Architecture(latent_dim=0), "agent.networks.latent_dim must be >= 1, got 0"),
     (lambda: NetworkConfig(width_strategy="cube"), "agent.width_strategy='cube'; valid: sqrt, linear"),
     (lambda: TDMPCConfig.from_dict({"networks": {"latent_dim": 0}}),
      "agent.networks.latent_dim must be >= 1, got 0"),
@@ -45,7 +45,7 @@ def test_good_options_build_and_keep_their_values():
     cfg = TDMPCConfig.from_dict({"group": "none", "networks": {"hidden_dim": 64}, "lr": 1,
                                  "equivariant": {"q": False}})
     assert cfg.group is None and cfg.networks.hidden_dim == 64 and cfg.lr == 1
-    assert cfg.network_config().hidden_dim == 64 and cfg.network_config().equivariant == {"q": False}
+    assert build_networks(cfg, None, 4, 2).config is cfg  # the agent's config is the networks' config
     env = EnvOptions.from_section({"id": "GeoMDP/Reacher-v0", "name": "reacher",
                                    "action_repeat": 4, "difficulty": "hard"})
     assert env.kwargs == {"difficulty": "hard"} and env.action_repeat == 4

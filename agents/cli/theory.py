@@ -17,7 +17,7 @@ import gymnasium
 import numpy as np
 
 import geomdp_envs  # noqa: F401
-from agents.nn.networks import NetworkConfig, build_networks
+from agents.nn.networks import Architecture, NetworkConfig, build_networks
 from geomdp_envs import groups, lqr
 from geomdp_envs.theory import dimension_table
 
@@ -55,15 +55,15 @@ def reduction_table() -> str:
 def parameter_table(hidden: int, latent: int) -> str:
     rows = [f"| task | agent | free parameters (plain width {hidden}, latent {latent}) "
             "| × plain |", "|---|---|---|---|"]
+    sizes = Architecture(hidden_dim=hidden, latent_dim=latent)
     for name, env_id, kwargs in TASKS[:4]:
         sym = symmetry_of(env_id, kwargs)
-        plain = sum(build_networks(NetworkConfig(hidden_dim=hidden, latent_dim=latent),
+        plain = sum(build_networks(NetworkConfig(networks=sizes),
                                    sym).parameter_counts().values())
         rows.append(f"| {name} | plain | {plain:,} | 1 |")
         for group in AGENT_GROUPS[sym.dim]:
             for strategy in ("sqrt", "linear"):
-                cfg = NetworkConfig(group=group, width_strategy=strategy, hidden_dim=hidden,
-                                    latent_dim=latent)
+                cfg = NetworkConfig(group=group, width_strategy=strategy, networks=sizes)
                 n = sum(build_networks(cfg, sym).parameter_counts().values())
                 rows.append(f"| {name} | {group} {strategy} | {n:,} | {n / plain:.2f} |")
     return "\n".join(rows)

@@ -18,10 +18,9 @@ network's tensor width and FLOPs, |G| times fewer parameters).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import typing
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 from torch import nn
@@ -36,37 +35,6 @@ from geomdp_envs.symmetry import Field, Symmetry
 
 WIDTH_STRATEGIES = ("sqrt", "linear")
 COMPONENTS = ("transition", "q", "policy")
-
-
-@dataclass
-class Equivariance:
-    """Which group the networks respect, and how: the options at the top of ``agent``."""
-
-    KEY: typing.ClassVar[str] = "agent"
-    group: str | None = None  # none | C<N> D<N> SO2 O2 | octahedral icosahedral SO3 O3 (the task decides)
-    width_strategy: str = option("sqrt", choices=WIDTH_STRATEGIES)
-    # Per component (transition: encoder, dynamics, reward; q; policy), for the ablation;
-    # a component left out is equivariant.
-    equivariant: dict[str, bool] = option(factory=lambda: {name: True for name in COMPONENTS})
-    # A continuous group that is only an approximate symmetry of the task (O2 on
-    # PointMass2D, whose walls keep only D4) is refused unless this is set.
-    allow_approximate: bool = False
-
-    def __post_init__(self) -> None:
-        if self.group == "none":
-            self.group = None
-        check(self)
-        if self.group is not None and not is_group_name(self.group):
-            raise OptionError(f"{key(Equivariance, 'group')}={self.group!r}; valid: none, "
-                              f"{GROUP_NAMES} (the task decides which apply)")
-        for name in self.equivariant:
-            if name not in COMPONENTS:
-                raise unknown(f"{key(Equivariance, 'equivariant')}.{name}", COMPONENTS)
-        use = {name: self.equivariant.get(name, True) for name in COMPONENTS}
-        if self.group is not None and (use["q"] or use["policy"]) and not use["transition"]:
-            raise OptionError("agent.equivariant: an equivariant Q or policy needs an "
-                              "equivariant latent state: make the transition (encoder, dynamics, "
-                              "reward) equivariant too")
 
 
 @dataclass
@@ -93,21 +61,42 @@ class Architecture:
 
 
 @dataclass
-class NetworkConfig(Equivariance, Architecture):
-    """Everything ``build_networks`` needs: the group options and the architecture."""
+class NetworkConfig:
+    """Everything ``build_networks`` needs, as the ``agent`` section nests it: which group
+    the networks respect and how (at the top of ``agent``), and their architecture
+    (``agent.networks``). ``TDMPCConfig`` extends it, so an agent's config is passed as is."""
+
+    KEY: typing.ClassVar[str] = "agent"
+    group: str | None = None  # none | C<N> D<N> SO2 O2 | octahedral icosahedral SO3 O3 (the task decides)
+    width_strategy: str = option("sqrt", choices=WIDTH_STRATEGIES)
+    # Per component (transition: encoder, dynamics, reward; q; policy), for the ablation;
+    # a component left out is equivariant.
+    equivariant: dict[str, bool] = option(factory=lambda: {name: True for name in COMPONENTS})
+    # A continuous group that is only an approximate symmetry of the task (O2 on
+    # PointMass2D, whose walls keep only D4) is refused unless this is set.
+    allow_approximate: bool = False
+    networks: Architecture = field(default_factory=Architecture)
 
     def __post_init__(self) -> None:
-        Equivariance.__post_init__(self)
-
-    @classmethod
-    def combine(cls, equivariance: Equivariance, architecture: Architecture) -> NetworkConfig:
-        return cls(**{f.name: getattr(equivariance, f.name) for f in dataclasses.fields(Equivariance)},
-                   **{f.name: getattr(architecture, f.name) for f in dataclasses.fields(Architecture)})
+        if self.group == "none":
+            self.group = None
+        check(self)
+        if self.group is not None and not is_group_name(self.group):
+            raise OptionError(f"{key(NetworkConfig, 'group')}={self.group!r}; valid: none, "
+                              f"{GROUP_NAMES} (the task decides which apply)")
+        for name in self.equivariant:
+            if name not in COMPONENTS:
+                raise unknown(f"{key(NetworkConfig, 'equivariant')}.{name}", COMPONENTS)
+        use = {name: self.equivariant.get(name, True) for name in COMPONENTS}
+        if self.group is not None and (use["q"] or use["policy"]) and not use["transition"]:
+            raise OptionError("agent.equivariant: an equivariant Q or policy needs an "
+                              "equivariant latent state: make the transition (encoder, dynamics, "
+                              "reward) equivariant too")
 
     def linear_kind(self) -> str:
         """The hidden layers' kind once ``auto`` is decided."""
-        if self.layers != "auto":
-            return self.layers
+        if self.networks.layers != "auto":
+            return self.networks.layers
         return "fourier" if self.width_strategy == "sqrt" else "dense"
 
 
@@ -161,8 +150,8 @@ class Space:
         self.group, self.config = group, config
         self.observation = self._declared(observation)
         self.action = self._declared(action)
-        self.hidden = self.regular(config.hidden_dim)
-        self.latent = self.regular(config.latent_dim)
+        self.hidden = self.regular(config.networks.hidden_dim)
+        self.latent = self.regular(config.networks.latent_dim)
         self.scalar = self.trivial(1)
 
     def _declared(self, fields: tuple[Field, ...]) -> Layout:
@@ -181,8 +170,8 @@ class Space:
 
     def mlp(self, in_layout: Layout, out_layout: Layout) -> FieldMLP:
         grid = None if self.group is None else self.group.quadrature
-        return FieldMLP(in_layout, [self.hidden] * self.config.hidden_layers, out_layout,
-                        self.config.activation, self.config.linear_kind(), grid)
+        return FieldMLP(in_layout, [self.hidden] * self.config.networks.hidden_layers, out_layout,
+                        self.config.networks.activation, self.config.linear_kind(), grid)
 
 
 def squash(x: torch.Tensor, fields: tuple[Field, ...]) -> torch.Tensor:
@@ -263,8 +252,8 @@ def build_networks(config: NetworkConfig, symmetry: Symmetry | None,
         raise ValueError(f"group {config.group} needs a task that declares its symmetry "
                          "(a GeoMDP task); use group=none for other environments")
     else:
-        group, exact = group_for_task(config.group, symmetry, config.max_frequency,
-                                      config.grid_frequency, config.allow_approximate)
+        group, exact = group_for_task(config.group, symmetry, config.networks.max_frequency,
+                                      config.networks.grid_frequency, config.allow_approximate)
         observation, action = symmetry.observation, symmetry.action
     use = {name: group is not None and config.equivariant.get(name, True) for name in COMPONENTS}
     spaces = {name: Space(observation, action, group if use[name] else None, config)
@@ -282,7 +271,7 @@ def build_networks(config: NetworkConfig, symmetry: Symmetry | None,
         dynamics=t.mlp(concat(latent, t.action), latent),
         reward=t.mlp(concat(latent, t.action), t.scalar).zero_output_layer(),
         qs=nn.ModuleList(q.mlp(concat(q.latent, q.action), q.scalar).zero_output_layer()
-                         for _ in range(config.num_q)),
+                         for _ in range(config.networks.num_q)),
         policy=p.mlp(p.latent, p.action),
         group=group, exact=exact, config=config, action_fields=action,
     )

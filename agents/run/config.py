@@ -134,10 +134,12 @@ def record_declaration(resolved: dict[str, Any]) -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class Task:
-    """What the agent needs to know about the task: its declaration and vector sizes, and
-    how the declaration was checked (``symmetry_check``: passed under which groups,
-    skipped, or empty when there was nothing to check)."""
+    """The task as checked: its Gymnasium env (made once, by ``check_task``; the run trains
+    in it), its declaration and vector sizes, and how the declaration was checked
+    (``symmetry_check``: passed under which groups, skipped, or empty when there was
+    nothing to check)."""
 
+    env: gymnasium.Env
     symmetry: Symmetry | None
     observation_size: int
     action_size: int
@@ -175,8 +177,8 @@ def check_declaration(options: RunOptions, env: gymnasium.Env, symmetry: Symmetr
 
 def check_task(options: RunOptions) -> Task:
     """The checks that need this machine or the task: the device and logger are here,
-    the env makes itself once (its own checks of its kwargs), the agent's group and
-    augmentation fit the task's declaration; warns once for an approximate group.
+    the env is made (its own checks of its kwargs; the run then trains in it), the agent's
+    group and augmentation fit the task's declaration; warns once for an approximate group.
     (Options alone are checked by the dataclasses, so reading a run's config needs
     neither its device nor its task.)"""
     if options.device.startswith("cuda") and not torch.cuda.is_available():
@@ -185,6 +187,14 @@ def check_task(options: RunOptions) -> Task:
         raise OptionError("logger.tensorboard=true but the tensorboard package is not installed "
                           "(pip install tensorboard); use logger.tensorboard=auto or false")
     env = make_gym_env(options.env)
+    try:
+        return _checked_task(options, env)
+    except BaseException:
+        env.close()
+        raise
+
+
+def _checked_task(options: RunOptions, env: gymnasium.Env) -> Task:
     symmetry = symmetry_of(env)
     agent = options.agent
     if agent.augment != "none":
@@ -194,11 +204,8 @@ def check_task(options: RunOptions) -> Task:
                           f"({', '.join(TASK_ENVS)}, or env.symmetry=<a YAML file or one of "
                           f"{', '.join(shipped_declarations())}>); {options.env.id} does not: "
                           "use agent.group=none")
-    try:
-        checked = check_declaration(options, env, symmetry) if symmetry is not None else ""
-    finally:
-        env.close()
-    task = Task(symmetry, env.observation_space.shape[0], env.action_space.shape[0], checked)
+    checked = check_declaration(options, env, symmetry) if symmetry is not None else ""
+    task = Task(env, symmetry, env.observation_space.shape[0], env.action_space.shape[0], checked)
     if agent.group is not None:
         nets = agent.networks
         try:

@@ -68,7 +68,7 @@ def build_parts(options: RunOptions, task: Task) -> Parts:
     torch.manual_seed(options.seed)
     np.random.seed(options.seed)
     env_opts = options.env
-    env = torchrl_env(make_gym_env(env_opts), env_opts.action_repeat)
+    env = torchrl_env(task.env, env_opts.action_repeat)  # made and checked by check_task
     if options.train.video:
         load_triton_before_mesa()
     eval_gym_env = make_gym_env(env_opts,

@@ -13,7 +13,7 @@ from torchrl.objectives import SoftUpdate
 from agents.compat.escnn import is_basis_expansion_key, is_linear_buffer
 from agents.nn.escnn_groups import GROUP_NAMES
 from agents.nn.expansion import expansion_scope
-from agents.nn.networks import Architecture, Equivariance, NetworkConfig, build_networks
+from agents.nn.networks import NetworkConfig, build_networks
 from agents.nn.spectral import GridActivation
 from agents.options import OptionError, check, from_dict, key, option
 from agents.tdmpc.augmentation import SliceAugmentation, is_augmentation_group_name
@@ -53,12 +53,12 @@ class Schedule:
 
 
 @dataclass
-class TDMPCConfig(Equivariance):
+class TDMPCConfig(NetworkConfig):
     """TD-MPC's hyperparameters (Hansen et al. 2022 defaults unless a preset says
-    otherwise), nested as the ``agent`` section of a run's config."""
+    otherwise), nested as the ``agent`` section of a run's config. It extends
+    ``NetworkConfig``: the agent's config is what ``build_networks`` takes."""
 
     KEY: typing.ClassVar[str] = "agent"
-    networks: Architecture = field(default_factory=Architecture)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     loss: LossConfig = field(default_factory=LossConfig)
     replay: ReplayConfig = field(default_factory=ReplayConfig)
@@ -75,7 +75,7 @@ class TDMPCConfig(Equivariance):
     augment: str = "none"
 
     def __post_init__(self) -> None:
-        Equivariance.__post_init__(self)
+        super().__post_init__()
         if self.augment not in ("none", "auto") and not is_augmentation_group_name(self.augment):
             raise OptionError(f"{key(TDMPCConfig, 'augment')}={self.augment!r}; valid: none, "
                               f"auto, or a group ({GROUP_NAMES}; the task decides which apply)")
@@ -88,10 +88,6 @@ class TDMPCConfig(Equivariance):
     def from_dict(cls, data: dict[str, Any]) -> TDMPCConfig:
         """Build from nested plain data (the ``agent`` section of a Hydra config)."""
         return from_dict(cls, data)
-
-    def network_config(self) -> NetworkConfig:
-        """What ``build_networks`` takes: the group options and the architecture."""
-        return NetworkConfig.combine(self, self.networks)
 
 
 AUGMENT_SEED = 1_000_003  # offset of the augmentation generator's seed from the agent's
@@ -109,7 +105,7 @@ class TDMPCAgent:
                  device: torch.device | str = "cpu", seed: int = 0) -> None:
         self.config, self.device = config, torch.device(device)
         self.observation_size, self.action_size = observation_size, action_size
-        self.networks = build_networks(config.network_config(), symmetry, observation_size, action_size)
+        self.networks = build_networks(config, symmetry, observation_size, action_size)
         self.action_fields = self.networks.action_fields
         self.model = WorldModel(self.networks, self.action_fields,
                                 noise_clip=config.loss.noise_clip).to(self.device)
