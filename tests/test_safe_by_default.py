@@ -53,7 +53,8 @@ def test_a_wrong_declaration_is_refused_before_anything_is_written(tmp_path, cap
         assert run(config(*REACHER_V5, f"env.symmetry={wrong}", *agent), run_dir) == 2
         (line,) = capsys.readouterr().err.strip().splitlines()
         assert line.startswith("geomdp-train: error: env.symmetry fails its check under O(2)"), line
-        assert "sin_elbow" in line and "env.check_symmetry=false" in line
+        assert "env.check_symmetry=false" in line
+        assert re.search(r"sin_elbow obs\[\d+\] \d\.\d\de\+00", line), line  # the env's index
         assert not run_dir.exists()
 
 

@@ -33,17 +33,26 @@ RESUMABLE_KEYS = ("train.steps", "train.eval_every", "train.eval_episodes",
                   "env.check_symmetry")
 
 
+def declaration_contents(source: str) -> dict[str, Any]:
+    """A declaration named by its file or shipped name, as the plain data ``config.yaml``
+    records; a declaration that cannot be read is an OptionError."""
+    try:
+        return load_declaration(source).to_dict()
+    except (ValueError, TypeError) as err:
+        raise OptionError(f"env.symmetry: {err}") from None
+
+
 def fixed_options(flat: dict[str, Any]) -> dict[str, Any]:
     """The flattened options a continued run must keep (all but ``RESUMABLE_KEYS``): what
     a checkpoint belongs to, and what a resume in the same run directory is checked on.
     A declaration recorded by name (runs made before ``record_declaration``) is compared
-    by its contents."""
+    by its contents; one unreadable now is compared by its name, so refused as changed."""
     source = flat.get("env.symmetry")
     if isinstance(source, str):
         try:
-            contents = load_declaration(source).to_dict()
-        except (ValueError, TypeError):
-            contents = None  # unreadable now: compared by name, so refused as changed
+            contents = declaration_contents(source)
+        except OptionError:
+            contents = None
         if contents is not None:
             flat = {**{k: v for k, v in flat.items() if k != "env.symmetry"},
                     **flatten(contents, "env.symmetry.")}
@@ -69,6 +78,26 @@ class TrainOptions:
 
     def __post_init__(self) -> None:
         check(self)
+
+    def evaluation_due(self, env_step: int, last_eval_step: int) -> bool:
+        """The trainer evaluates after the episode that ends ``eval_every`` or more env steps
+        after the last evaluation, and after the last episode."""
+        return env_step - last_eval_step >= self.eval_every or env_step >= self.steps
+
+    def evaluations_left(self, env_step: int, last_eval_step: int | None,
+                         episode_steps: int = 1) -> int:
+        """How many evaluations the trainer will still make from ``env_step`` on (one at
+        ``env_step`` if it is due there; ``last_eval_step=None``: none made yet), episodes
+        of ``episode_steps`` env steps ahead (exact once an episode's length is known)."""
+        count = 0
+        if last_eval_step is None or (env_step > last_eval_step
+                                      and self.evaluation_due(env_step, last_eval_step)):
+            count, last_eval_step = 1, env_step
+        while env_step < self.steps:
+            env_step += episode_steps
+            if self.evaluation_due(env_step, last_eval_step):
+                count, last_eval_step = count + 1, env_step
+        return count
 
 
 @dataclass
@@ -125,11 +154,7 @@ def record_declaration(resolved: dict[str, Any]) -> dict[str, Any]:
     env = resolved.get("env")
     if not isinstance(env, dict) or not isinstance(env.get("symmetry"), str):
         return resolved
-    try:
-        contents = load_declaration(env["symmetry"]).to_dict()
-    except (ValueError, TypeError) as err:
-        raise OptionError(f"env.symmetry: {err}") from None
-    return {**resolved, "env": {**env, "symmetry": contents}}
+    return {**resolved, "env": {**env, "symmetry": declaration_contents(env["symmetry"])}}
 
 
 @dataclass(frozen=True)
@@ -163,15 +188,10 @@ def check_declaration(options: RunOptions, env: gymnasium.Env, symmetry: Symmetr
         raise OptionError(f"env.symmetry cannot be checked under {group} ({err}); fix the "
                           "declaration, or pass env.check_symmetry=false to train "
                           "unchecked") from None
-    if not report.passed:
-        where = ", ".join(f"{name} {report.field_errors[name]:.2e}"
-                          for name in report.failing_fields) or (
-            f"reward {report.max_reward_error:.2e}, next observation "
-            f"{report.max_next_observation_error:.2e}")
+    if not report.passed:  # the report's own line: errors, fields at the env's indices, hint
         raise OptionError(f"env.symmetry fails its check under {group}, its exact group: "
-                          f"{where} (tolerance {report.tolerance:.0e}); see geomdp-check "
-                          f"{options.env.id} <declaration> --group {group}, or pass "
-                          "env.check_symmetry=false to train anyway")
+                          f"{report}; see geomdp-check {options.env.id} <declaration> --group "
+                          f"{group}, or pass env.check_symmetry=false to train anyway")
     return f"passed under {group} ({report.n_trials} trials)"
 
 

@@ -7,18 +7,22 @@ from __future__ import annotations
 
 import math
 import time
+from typing import TYPE_CHECKING
 
 from tqdm import tqdm
+
+if TYPE_CHECKING:
+    from agents.run.config import TrainOptions
 
 
 class Progress:
     """A ``tqdm`` bar over environment steps with an ETA that counts evaluations."""
 
-    def __init__(self, steps: int, initial: int, eval_every: int, last_eval_step: int | None,
-                 enabled: bool = True) -> None:
-        self.steps, self.eval_every = steps, eval_every
-        self.last_eval_step = last_eval_step
-        self.bar = tqdm(total=steps, initial=initial, unit="step", disable=not enabled,
+    def __init__(self, train: TrainOptions, initial: int, last_eval_step: int | None) -> None:
+        self.train, self.steps = train, train.steps
+        self.env_step, self.last_eval_step = initial, last_eval_step  # a disabled bar counts nothing
+        self.episode_steps = 1  # until the first episode ends
+        self.bar = tqdm(total=train.steps, initial=initial, unit="step", disable=not train.progress,
                         dynamic_ncols=True, desc="env steps",
                         bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} "
                                    "[{elapsed}{postfix}]")
@@ -28,6 +32,7 @@ class Progress:
         self._eval_start: float | None = None
         self.last_return: float | None = None
         self.rounded_note = False
+        self.evaluations_left = train.evaluations_left(initial, last_eval_step)
 
     # training --------------------------------------------------------------------------
     def episode_started(self) -> None:
@@ -38,6 +43,7 @@ class Progress:
         now = time.perf_counter()
         self.train_seconds += now - self._clock
         self.train_steps += env_steps
+        self.env_step += env_steps
         self._clock = now
         self.bar.update(env_steps)
         self._show()
@@ -50,6 +56,8 @@ class Progress:
         """A training episode and its updates are done. A budget that is not a whole number
         of episodes (they are never cut) is stated once, and the bar's total follows it."""
         self.train_seconds += time.perf_counter() - self._clock  # the updates
+        self.episode_steps = episode_steps
+        self._count_evaluations()
         if not self.rounded_note and self.steps % episode_steps:
             final = math.ceil(self.steps / episode_steps) * episode_steps
             self.bar.total = max(self.bar.total, final)
@@ -70,32 +78,30 @@ class Progress:
         if self._eval_start is not None:
             self.eval_seconds = time.perf_counter() - self._eval_start
         self._eval_start, self.last_eval_step, self.last_return = None, env_step, mean_return
+        self._count_evaluations()
         self.bar.set_description("env steps")
         self._clock = time.perf_counter()
         self._show()
 
     # the estimate ----------------------------------------------------------------------
-    def evaluations_left(self, env_step: int) -> int:
-        """Evaluations still to come: one every ``eval_every`` steps, and one at the end."""
-        last = self.last_eval_step if self.last_eval_step is not None else env_step
-        final = max(self.bar.total, self.steps)
-        if env_step >= final:
-            return 0
-        due = max(0, (final - last - 1) // self.eval_every)
-        return due + 1
+    def _count_evaluations(self) -> None:
+        """The trainer's own schedule (``TrainOptions.evaluations_left``), counted again when
+        an episode or an evaluation ends: one count per episode, not per step."""
+        self.evaluations_left = self.train.evaluations_left(self.env_step, self.last_eval_step,
+                                                            self.episode_steps)
 
     def seconds_left(self, env_step: int) -> float | None:
         if not self.train_steps:
             return None
         remaining = max(0, max(self.bar.total, self.steps) - env_step)
         seconds = remaining * self.train_seconds / self.train_steps
-        return seconds + self.evaluations_left(env_step) * (self.eval_seconds or 0.0)
+        return seconds + self.evaluations_left * (self.eval_seconds or 0.0)
 
     def _show(self) -> None:
         parts = []
         if self.last_return is not None:
             parts.append(f"eval return {self.last_return:.1f}")
-        left = self.seconds_left(self.bar.n)
+        left = self.seconds_left(self.env_step)
         if left is not None:
             parts.append(f"ETA {tqdm.format_interval(left)}"
                          + ("" if self.eval_seconds is not None else " + evaluations"))

@@ -213,8 +213,7 @@ class Trainer:
 
     def train(self) -> None:
         cfg, state = self.options.train, self.state
-        self.progress = Progress(cfg.steps, state["env_step"], cfg.eval_every,
-                                 state["last_eval_step"], cfg.progress)
+        self.progress = Progress(cfg, state["env_step"], state["last_eval_step"])
         try:
             self._train()
         finally:
@@ -250,8 +249,7 @@ class Trainer:
             self.log.log("train", {**self._counters(), **metrics,
                                    "episode_reward": float(td["next", "reward"].sum()),
                                    "steps_per_second": length * self.action_repeat / elapsed})
-            if (state["env_step"] - state["last_eval_step"] >= cfg.eval_every
-                    or state["env_step"] >= cfg.steps):
+            if cfg.evaluation_due(state["env_step"], state["last_eval_step"]):
                 eval_start = time.perf_counter()
                 self.evaluate()
                 state["wall_time"] += time.perf_counter() - eval_start
