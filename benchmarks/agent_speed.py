@@ -8,9 +8,11 @@ measures both for the plain agent, the plain agent on symmetry-augmented replay
 Reacher hard) and icosahedral (PointMass3D) agents with both width strategies, the ``sqrt`` ones with their
 hidden layers dense (escnn's expanded matrix: the reference) and in the irrep
 basis (``FourierLinear``: the default), the continuous groups' agents (SO2, O2
-beside D8; SO3, O3 beside icosahedral; default band limit and grid), and prints
-ratios to the plain agent on the same task. It also counts the planner's FLOPs (as the dense expanded
-layers it stands for) and compares its achieved FLOP rate with that of a plain
+beside D8; SO3, O3 beside icosahedral; default band limit and grid), plain,
+octahedral and icosahedral ``linear`` agents on PointMass3D with 5 balls (the
+N-ball experiment's largest task), and prints ratios to the plain agent on the
+same task. It also counts the planner's FLOPs (as the dense expanded layers it stands
+for) and compares its achieved FLOP rate with that of a plain
 matrix product of the planner's batch and width; and it counts the arithmetic an
 agent step actually does (matmul-type ops, irrep-basis transforms included, by
 torch's FLOP formulas), so that a ratio to plain splits into "more arithmetic"
@@ -25,7 +27,7 @@ alike); each row reports medians, and its ratio to the plain agent per round.
 before" ratios.
 
     python benchmarks/agent_speed.py [--threads 1] [--preset tdmpc] [--baseline /tmp/landed]
-                                     [--only plain D8]
+                                     [--only plain D8] [--tasks "pointmass3d 5 balls"]
 """
 
 from __future__ import annotations
@@ -75,8 +77,17 @@ CONFIGS = [
     ("pointmass3d", "SO3 sqrt", ["agent.group=SO3", "agent.width_strategy=sqrt"]),
     ("pointmass3d", "O3 linear", ["agent.group=O3", "agent.width_strategy=linear"]),
     ("pointmass3d", "O3 sqrt", ["agent.group=O3", "agent.width_strategy=sqrt"]),
+    # the N-ball experiment's largest task (the paper's Figure 3), at its linear width
+    ("pointmass3d 5 balls", "plain", ["agent.group=none"]),
+    ("pointmass3d 5 balls", "octahedral linear", ["agent.group=octahedral",
+                                                  "agent.width_strategy=linear"]),
+    ("pointmass3d 5 balls", "icosahedral linear", ["agent.group=icosahedral",
+                                                   "agent.width_strategy=linear"]),
 ]
 LABELS = {label for _, label, _ in CONFIGS}  # what --only can name whole
+TASKS = list(dict.fromkeys(task for task, _, _ in CONFIGS))  # what --tasks can name
+# A task that is not an env config's name: the env config and its options.
+TASK_ENVS = {"pointmass3d 5 balls": ("pointmass3d", ["env.n_balls=5", "env.target_size=0.03"])}
 
 # Runs inside the measured checkout (its own agents package), with only the APIs
 # that every version of it has; prints one JSON line.
@@ -168,8 +179,9 @@ print(json.dumps({"plan": plan, "update": update, "width": width,
 
 def measure(tree: Path, task: str, overrides: list[str], threads: int, preset: str,
             repeats: int) -> dict[str, float]:
-    out = subprocess.run([sys.executable, "-c", MEASURE, str(threads), task, str(repeats),
-                          f"agent={preset}", *overrides],
+    env, env_options = TASK_ENVS.get(task, (task, []))
+    out = subprocess.run([sys.executable, "-c", MEASURE, str(threads), env, str(repeats),
+                          f"agent={preset}", *env_options, *overrides],
                          cwd=tree, capture_output=True, text=True,
                          env={**os.environ, "PYTHONPATH": str(tree), "RL_WARNINGS": "False"})
     if out.returncode != 0:
@@ -195,6 +207,8 @@ def main() -> None:
     parser.add_argument("--only", nargs="*", default=None,
                         help="measure only these agents: a word that is a whole label picks that "
                              "label ('plain'), any other picks the labels containing it ('D8')")
+    parser.add_argument("--tasks", nargs="*", default=TASKS, choices=TASKS, metavar="TASK",
+                        help=f"measure only these tasks (default: all): {', '.join(TASKS)}")
     args = parser.parse_args()
     import torch
 
@@ -202,8 +216,9 @@ def main() -> None:
           f"{args.threads} thread(s); agent preset {args.preset}\n")
     # Every configuration once per round, rounds repeated: a change in the machine's load
     # hits all of them alike, and each row reports its median over the rounds.
-    selected = [c for c in CONFIGS if c[1] == "plain"  # every ratio's denominator
-                or args.only is None or any(picks(word, c[1]) for word in args.only)]
+    selected = [c for c in CONFIGS if c[0] in args.tasks and (
+        c[1] == "plain"  # every ratio's denominator
+        or args.only is None or any(picks(word, c[1]) for word in args.only))]
     runs: dict[tuple[str, str], list[dict[str, float]]] = {(t, lab): [] for t, lab, _ in selected}
     for _ in range(args.rounds):
         for task, label, overrides in selected:
