@@ -7,11 +7,13 @@ it), at most ``--parallel`` at a time with one torch thread each, before a deadl
   the finished runs of its group -- the folder above its seed folder -- or from
   ``--estimate``), except runs matching ``--carry-over``: longer than any session, they
   start whenever ``--carry-over-minutes`` are left and advance from checkpoint to
-  checkpoint, one session after another, on a machine that keeps the worktree;
+  checkpoint, one session after another;
 - at the deadline, runs still going get SIGTERM: they stop at a safe point with their
   last checkpoint, and the next call of the same command resumes them on a machine
   that still has the checkpoints (a run that must start over says so in its
-  ``stdout.log``);
+  ``stdout.log``). A carried-over run's directory, checkpoint included, is committed
+  when it stops, so the next session resumes it even on a fresh machine (whose
+  worktree is new); its checkpoint leaves the tree when the run finishes;
 - each finished run's logs (never its checkpoints) are copied into the checkout's
   ``results/`` and committed at once, after checking that every session of the run
   used the pinned commit with no local changes (``sessions.csv``);
@@ -225,15 +227,29 @@ def session_problems(run_dir: Path, commit: str) -> list[str]:
     return problems or ([] if rows else ["sessions.csv is empty"])
 
 
-def copy_logs(src: Path, dest: Path) -> None:
-    """The run's logs, without its checkpoints, replace ``dest``: copied beside it first,
-    so that an interrupted copy never leaves a ``dest`` that looks finished."""
+def copy_logs(src: Path, dest: Path, with_checkpoint: bool = False) -> None:
+    """The run's logs, without its checkpoints (``with_checkpoint``: with its last complete
+    one, for a carried run), replace ``dest``: copied beside it first, so that an
+    interrupted copy never leaves a ``dest`` that looks finished."""
+    skipped = [n for n in LOG_FILES_SKIPPED if not (with_checkpoint and n == "checkpoint")]
     partial = dest.with_name(dest.name + ".copying")
     shutil.rmtree(partial, ignore_errors=True)
-    shutil.copytree(src, partial, ignore=shutil.ignore_patterns(*LOG_FILES_SKIPPED))
+    shutil.copytree(src, partial, ignore=shutil.ignore_patterns(*skipped))
     if dest.exists():
         shutil.rmtree(dest)
     partial.rename(dest)
+
+
+def cpu_model() -> str:
+    """This machine's processor, as /proc/cpuinfo names it (runs of one commit are
+    bit-identical on one kind of machine only)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "unknown cpu"
 
 
 def git(repo: Path, *args: str) -> subprocess.CompletedProcess[str]:
@@ -246,9 +262,11 @@ def git(repo: Path, *args: str) -> subprocess.CompletedProcess[str]:
     return done
 
 
-def commit_results(repo: Path, dest: str, message: str) -> str:
-    """Commit exactly ``dest`` (other staged or unstaged work in the checkout stays as it is)."""
-    for args in (("add", "--", dest), ("commit", "-q", "-m", message, "--only", "--", dest)):
+def commit_results(repo: Path, dest: str, message: str, force: bool = False) -> str:
+    """Commit exactly ``dest`` (other staged or unstaged work in the checkout stays as it
+    is); ``force`` adds ignored files too (a carried run's checkpoint)."""
+    add = ("add", "-f", "--", dest) if force else ("add", "--", dest)
+    for args in (add, ("commit", "-q", "-m", message, "--only", "--", dest)):
         done = git(repo, *args)
         if done.returncode:
             return f"git {args[0]} failed: {done.stderr.strip() or done.stdout.strip()}"
@@ -391,6 +409,11 @@ class Queue:
             self.failed.add(run.dest)
             say(f"NOT STARTED {run.dest}: process {pid} (another queue?) is training it")
             return
+        committed = checkpoint_step(self.repo / run.dest)
+        if committed and committed > (checkpoint_step(run.work) or 0):
+            copy_logs(self.repo / run.dest, run.work, with_checkpoint=True)
+            say(f"{run.dest}: took the checkpoint at env step {committed} committed by an "
+                "earlier session")
         step, logged = checkpoint_step(run.work), logged_step(run.work)
         if step:
             how = f"resuming from its checkpoint at env step {step}"
@@ -402,7 +425,7 @@ class Queue:
             how = "starting"
         with (run.work / "stdout.log").open("a") as out:
             out.write(f"run_queue {dt.datetime.now():%Y-%m-%d %H:%M:%S}: {how}, "
-                      f"commit {self.commit[:10]}\n")
+                      f"commit {self.commit[:10]}, cpu {cpu_model()}\n")
             out.flush()
             # A session of its own: Ctrl-C on the queue reaches the trainers only through
             # stop_all's one SIGTERM (a second signal would stop them without their
@@ -431,6 +454,24 @@ class Queue:
         outcome = commit_results(self.repo, run.dest, message) if self.commit_results else "copied"
         say(f"finished {run.dest}: {outcome}")
 
+    def carry(self, run: Run) -> None:
+        """Commit a stopped carried-over run with its checkpoint, so that the next session
+        resumes it on any machine (``start`` takes it when the worktree has none as far)."""
+        step = checkpoint_step(run.work)
+        if step is None or not self.commit_results:
+            return
+        if problems := session_problems(run.work, self.commit):
+            self.failed.add(run.dest)
+            say(f"NOT CARRIED {run.dest}: {'; '.join(problems)}")
+            return
+        copy_logs(run.work, self.repo / run.dest, with_checkpoint=True)
+        size = sum(p.stat().st_size for p in (self.repo / run.dest / "checkpoint").rglob("*")
+                   if p.is_file())
+        message = (f"Run queue: {run.dest} carried at env step {step} (code {self.commit[:10]}; "
+                   f"checkpoint {size / 2**20:.1f} MiB committed so the next session resumes "
+                   "it on any machine)")
+        say(f"carried {run.dest}: {commit_results(self.repo, run.dest, message, force=True)}")
+
     def reap(self) -> None:
         for dest, (run, proc, _) in list(self.running.items()):
             status = proc.poll()
@@ -442,6 +483,8 @@ class Queue:
                 self.collect(run)
             elif status in (130, -signal.SIGTERM):
                 say(f"stopped {dest} at its checkpoint (env step {checkpoint_step(run.work)})")
+                if self.carried_over(run):
+                    self.carry(run)
             else:
                 self.failed.add(dest)
                 say(f"FAILED {dest} (exit {status}): see {run.work / 'stdout.log'}")

@@ -77,11 +77,12 @@ def repo(tmp_path: Path) -> Path:
     (repo / ".gitignore").write_text("checkpoint/\n")
     git(repo, "add", ".")
     git(repo, "commit", "-q", "-m", "code")
+    git(repo, "tag", "code")  # the pinned commit (results commits come after it)
     return repo
 
 
 def make_queue(repo: Path, plan: str, minutes_left: float, **kw: object) -> rq.Queue:
-    commit, worktree = rq.pinned_worktree(repo, "HEAD", repo.parent / "pinned")
+    commit, worktree = rq.pinned_worktree(repo, "code", repo.parent / "pinned")
     deadline = dt.datetime.now() + dt.timedelta(minutes=minutes_left)
     return rq.Queue(rq.read_plan(plan), repo, commit, worktree, deadline, python=sys.executable,
                     module="fake_train", poll_seconds=0.05, stop_grace_seconds=10, **kw)
@@ -144,11 +145,41 @@ def test_carried_over_runs_start_without_fitting_and_stop_at_the_deadline(repo: 
     queue.run()
     step = rq.checkpoint_step(queue.runs[0].work)
     assert step is not None and 0 < step < 400
-    assert not (repo / "results/x/long/seed1").exists()  # unfinished: nothing collected
+    assert rq.checkpoint_step(repo / "results/x/long/seed1") == step  # carried, not finished
     resumed = make_queue(repo, plan, 30, estimates=estimates, carry_over=["results/x/long"])
     resumed.run()
     assert rq.logged_step(repo / "results/x/long/seed1") == 400
     assert "resuming from its checkpoint" in (queue.runs[0].work / "stdout.log").read_text()
+
+
+def test_a_carried_run_is_committed_with_its_checkpoint_and_resumes_on_a_fresh_machine(
+        repo: Path) -> None:
+    """Stopped at the deadline, a carried-over run's directory is committed with its
+    checkpoint; a queue whose worktree is new (another machine) resumes from it, and
+    when the run finishes its checkpoint leaves the tree."""
+    plan = "results/x/long/seed1 300 delay=0.01\n"
+    queue = make_queue(repo, plan, 30, carry_over=["results/x/*"], carry_over_minutes=0.0)
+    queue.deadline = dt.datetime.now() + dt.timedelta(seconds=1.5)
+    queue.run()
+    step = rq.checkpoint_step(queue.runs[0].work)
+    assert step is not None and 0 < step < 300
+    dest = repo / "results/x/long/seed1"
+    assert rq.checkpoint_step(dest) == step and rq.logged_step(dest) == step
+    message = git(repo, "log", "-1", "--format=%s")
+    assert f"results/x/long/seed1 carried at env step {step}" in message
+    assert "results/x/long/seed1/checkpoint/state.json" in git(repo, "ls-files", "results")
+    assert not git(repo, "status", "--porcelain", "--ignored", "--", "results")
+    # a fresh machine: the pinned worktree is gone, the checkout holds what was committed
+    git(repo, "worktree", "remove", "--force", str(queue.worktree))
+    fresh = make_queue(repo, plan, 30, carry_over=["results/x/*"])
+    assert fresh.run() == 0
+    log = (fresh.runs[0].work / "stdout.log").read_text()
+    assert f"resuming from its checkpoint at env step {step}" in log and "cpu " in log
+    assert rq.logged_step(dest) == 300
+    assert (dest / "eval.csv").read_text().count("\n") == 301  # header + steps 1..300 once
+    assert "checkpoint" not in git(repo, "ls-files", "results")
+    assert not (dest / "checkpoint").exists()
+    assert "results/x/long/seed1 finished" in git(repo, "log", "-1", "--format=%s")
 
 
 def test_queue_skips_finished_resumes_partial_and_commits_logs_only(repo: Path) -> None:
@@ -283,7 +314,7 @@ def test_runs_from_another_commit_are_not_collected(repo: Path) -> None:
 
 
 def test_worktree_must_be_the_pinned_commit(repo: Path) -> None:
-    commit, worktree = rq.pinned_worktree(repo, "HEAD", repo.parent / "pinned")
+    commit, worktree = rq.pinned_worktree(repo, "code", repo.parent / "pinned")
     (repo / "more.txt").write_text("x")
     git(repo, "add", "more.txt")
     git(repo, "commit", "-q", "-m", "later")
