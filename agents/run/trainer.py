@@ -63,7 +63,12 @@ class Parts:
 
 def build_parts(options: RunOptions, task: Task) -> Parts:
     """Seed torch and numpy, then make the envs, the agent and the replay (in this order:
-    the agent's initial weights come from the seeded global generator)."""
+    the agent's initial weights come from the seeded global generator).
+
+    The training env is the one ``check_task`` made and checked. Evaluation has an env of
+    its own (as TorchRL's examples do; TD-MPC evaluates on its training env): evaluating
+    never moves the training env's generator, so the training episodes' start states do
+    not depend on the evaluation settings, and only the evaluation env renders videos."""
     torch.set_num_threads(options.train.threads)
     torch.manual_seed(options.seed)
     np.random.seed(options.seed)
