@@ -292,3 +292,24 @@ def test_evaluation_share_is_the_wall_time_not_spent_training(tmp_path, capsys):
     assert "| 0 5.0 | 1 (50%) |" in capsys.readouterr().out
     (run / "train.csv").write_text("env_step,wall_time\n1000,10.0\n")  # a log from before
     assert evaluation_share(run) is None and evaluation_share(tmp_path / "missing") is None
+
+
+def test_plot_shows_published_per_seed_results_up_to_the_longest_run(tmp_path, capsys):
+    write_run(tmp_path / "a/1", "none", 1, [0, 100, 500, 900])
+    published = tmp_path / "published.csv"
+    published.write_text("algorithm,task,seed,env_step,episode_reward\n"
+                         "tdmpc,hard,2,0,20.7\ntdmpc,hard,1,0,7.4\ntdmpc,hard,1,2000,975.1\n"
+                         "tdmpc,hard,2,2000,675.1\ntdmpc,hard,1,9000,970.0\n"
+                         "tdmpc2,hard,1,2000,507.3\n")
+    out = tmp_path / "curves.png"
+    plot.main([str(tmp_path / "a"), "--out", str(out), "--published", f"{published}:tdmpc:hard"])
+    assert out.stat().st_size > 10_000
+    table = capsys.readouterr().out
+    assert "| tdmpc, hard | 0 | 7.4 (seed 1), 20.7 (seed 2) | 14.1 |" in table
+    assert "| tdmpc, hard | 2000 | 975.1 (seed 1), 675.1 (seed 2) | 825.1 |" in table
+    assert "9000" not in table  # beyond the runs' 3000 steps
+    for spec, message in [(f"{published}:tdmpc", "is not PATH:ALGORITHM:TASK"),
+                          (f"{published}:tdmpc:easy", "valid: tdmpc2:hard, tdmpc:hard"),
+                          (f"{tmp_path}/none.csv:tdmpc:hard", "cannot read")]:
+        with pytest.raises(SystemExit, match=message):
+            plot.main([str(tmp_path / "a"), "--published", spec])

@@ -25,13 +25,14 @@ Runs are found and grouped by ``agents.run.results`` and their statistics comput
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 from pathlib import Path
 
 import numpy as np
 from scipy import stats
 
-from agents.run.results import Run, find_runs, group_runs, seed_order
+from agents.run.results import Published, Run, find_runs, group_runs, read_published, seed_order
 from agents.run.run_tables import evaluation_share, wall_minutes
 from agents.run.statistics import (
     curve,
@@ -171,8 +172,23 @@ def runs_table(groups: dict[str, list[Run]]) -> str:
     return "\n".join(rows)
 
 
+def published_table(published: list[Published], last_step: float) -> str:
+    """``--published``: the other project's per-seed returns at its evaluation steps up
+    to ``last_step`` (the longest run here), so that a reader compares like with like."""
+    rows = ["| published | env steps | per seed | mean |", "|---|---|---|---|"]
+    for series in published:
+        for step, points in series.until(last_step).items():
+            per_seed = ", ".join(f"{value:.1f} (seed {seed})" for seed, value in points)
+            mean = sum(v for _, v in points) / len(points)
+            rows.append(f"| {series.algorithm}, {series.task} | {step} | {per_seed} | {mean:.1f} |")
+    return "\n".join(rows)
+
+
+PUBLISHED_MARKERS = ("D", "^", "s", "v", "P")
+
+
 def plot(groups: dict[str, list[Run]], out: Path, title: str,
-         references: list[tuple[float, str]]) -> None:
+         references: list[tuple[float, str]], published: list[Published] = ()) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -185,6 +201,14 @@ def plot(groups: dict[str, list[Run]], out: Path, title: str,
         ax.fill_between(steps, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
     for value, name in references:
         ax.axhline(value, color="black", linestyle="--", linewidth=1, label=name)
+    last_step = max(run.steps[-1] for runs in groups.values() for run in runs)
+    for series, marker in zip(published, itertools.cycle(PUBLISHED_MARKERS)):
+        points = [(step, value) for step, values in series.until(last_step).items()
+                  for _, value in values]
+        if points:
+            seeds = len(next(iter(series.points.values())))
+            ax.scatter(*zip(*points), marker=marker, color="black", facecolors="none", zorder=3,
+                       label=f"{series.algorithm}, published ({seeds} seeds, one marker each)")
     ax.set_xlabel("environment steps")
     ax.set_ylabel("evaluation return")
     ax.set_title(title)
@@ -249,6 +273,10 @@ def main(argv: list[str] | None = None) -> None:
                         help="is GROUP's margin over BASELINE (paired by seed) larger than "
                              "GROUP2's over BASELINE2? e.g. D8 over plain on hard vs on easy; "
                              "repeatable")
+    parser.add_argument("--published", metavar="PATH:ALGORITHM:TASK", action="append", default=[],
+                        help="another project's per-seed returns (CSV: algorithm, task, seed, "
+                             "env_step, episode_reward) as markers and a table, e.g. "
+                             "results/published/reacher.csv:tdmpc:reacher-hard; repeatable")
     parser.add_argument("--runs", action="store_true",
                         help="also list every run: evaluations, wall time, TD learner invariants")
     args = parser.parse_args(argv)
@@ -263,9 +291,16 @@ def main(argv: list[str] | None = None) -> None:
     for ref in args.reference:
         value, _, name = ref.partition(":")
         references.append((float(value), name or "reference"))
+    try:
+        published = [read_published(spec) for spec in args.published]
+    except ValueError as err:
+        raise SystemExit(f"geomdp-plot: error: {err}") from None
     if args.out:
-        plot(groups, args.out, args.title or default_title(args.paths), references)
+        plot(groups, args.out, args.title or default_title(args.paths), references, published)
     text = table(groups, args.threshold)
+    if published:
+        last_step = max(run.steps[-1] for run in runs)
+        text += "\n\n" + published_table(published, last_step)
     if args.paired:
         text += "\n\n" + paired_table(groups, paired)
     if args.contrast:

@@ -1,6 +1,7 @@
 """Runs as data: the run directories (``eval.csv`` and ``config.yaml``) under some
 paths, each with its options and evaluation returns (``Run``), grouped by the options
-in which they differ (``group_runs``).
+in which they differ (``group_runs``); and published per-seed results to compare
+against (``read_published``).
 
 Torch-free, as ``run_tables``: ``geomdp-plot`` reads runs without loading the networks'
 libraries.
@@ -67,3 +68,45 @@ def group_runs(runs: list[Run], ignored: tuple[str, ...] = ()) -> dict[str, list
 def seed_order(seed: object) -> str:
     """Sort key: seeds in numeric order (2 before 10) whether they are ints or strings."""
     return str(seed).zfill(12)
+
+
+@dataclass
+class Published:
+    """Another project's per-seed evaluation returns on one task (e.g. TD-MPC's own runs
+    of reacher-hard), read from a CSV with columns algorithm, task, seed, env_step,
+    episode_reward."""
+
+    algorithm: str
+    task: str
+    points: dict[int, list[tuple[str, float]]]  # env step -> [(seed, return)]
+
+    def until(self, last_step: float) -> dict[int, list[tuple[str, float]]]:
+        """The points at env steps up to ``last_step`` (the longest run compared)."""
+        return {step: values for step, values in self.points.items() if step <= last_step}
+
+
+def read_published(spec: str) -> Published:
+    """``PATH:ALGORITHM:TASK`` (e.g. ``results/published/reacher.csv:tdmpc:reacher-hard``)."""
+    path, algorithm, task = (spec.rsplit(":", 2) + ["", ""])[:3]
+    if not algorithm or not task:
+        raise ValueError(f"--published {spec!r} is not PATH:ALGORITHM:TASK "
+                         "(e.g. results/published/reacher.csv:tdmpc:reacher-hard)")
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+    except OSError as err:
+        raise ValueError(f"--published {spec!r}: cannot read {path} ({err.strerror})") from None
+    missing = {"algorithm", "task", "seed", "env_step", "episode_reward"} - set(rows[0] if rows else ())
+    if missing:
+        raise ValueError(f"--published {spec!r}: {path} lacks the columns {sorted(missing)}")
+    points: dict[int, list[tuple[str, float]]] = {}
+    for row in rows:
+        if row["algorithm"] == algorithm and row["task"] == task:
+            points.setdefault(int(row["env_step"]), []).append(
+                (row["seed"], float(row["episode_reward"])))
+    if not points:
+        pairs = sorted({f"{r['algorithm']}:{r['task']}" for r in rows})
+        raise ValueError(f"--published {spec!r}: no rows of {algorithm} on {task} in {path}; "
+                         f"valid: {', '.join(pairs)}")
+    return Published(algorithm, task, {step: sorted(v, key=lambda sv: seed_order(sv[0]))
+                                       for step, v in sorted(points.items())})
