@@ -366,3 +366,17 @@ def test_dry_run_prints_the_plan_and_makes_no_worktree(repo: Path, monkeypatch, 
     out = capsys.readouterr().out
     assert "5 min fits  results/x/a/seed1" in out and "fake_train seed=1 train.steps=100" in out
     assert not worktree.exists() and "not-made" not in git(repo, "worktree", "list")
+
+
+def test_an_adopted_carried_run_is_committed_with_its_checkpoint(repo: Path, capsys,
+                                                                 start_outside_the_queue) -> None:
+    """The carry also covers a trainer an earlier, killed queue started (its exit status is
+    inferred): stopped at the deadline, it is committed with its checkpoint."""
+    plan = "results/x/long/seed1 100000 delay=0.01\n"
+    queue = make_queue(repo, plan, minutes_left=0.03, carry_over=["results/x/*"])
+    start_outside_the_queue(queue, queue.runs[0])
+    assert queue.run() == 0
+    assert "adopted results/x/long/seed1" in capsys.readouterr().out
+    step = rq.checkpoint_step(queue.runs[0].work)
+    assert step and rq.checkpoint_step(repo / "results/x/long/seed1") == step
+    assert f"carried at env step {step}" in git(repo, "log", "-1", "--format=%s")
