@@ -33,6 +33,7 @@ from agents.compat.escnn import (
     is_basis_expansion_key,
     is_linear_buffer,
     own_basis_expansion,
+    use_exact_null_space,
 )
 from agents.compat.torch import ConversionHook, TorchDispatchMode, child_modules, parameter_table
 from agents.compat.torchrl import (
@@ -484,6 +485,28 @@ def test_escnn_buffers_are_what_an_agent_leaves_out_of_its_checkpoints():
         "escnn", "Linear has state-dict entries that agents.compat.escnn does not name: "
                  f"{sorted(set(entries) - set(coefficients) - set(rebuilt))[:3]}")
     assert any(k.endswith(".bias_expansion") for k in rebuilt)
+
+
+def test_escnn_solves_null_spaces_with_scipy_even_beside_scikit_learn(monkeypatch):
+    """escnn switches to scikit-learn's randomized SVD whenever it can import it, and
+    scikit-learn >= 1.2 refuses the np.matrix escnn passes (a GPU machine's image had
+    it: no D8 network could be built there). use_exact_null_space, called when
+    agents.nn.escnn_groups is imported, puts escnn back on scipy's exact SVD."""
+    from escnn.group import _numerical
+
+    import agents.nn.escnn_groups  # noqa: F401  (calls use_exact_null_space)
+
+    assert _numerical.randomized_svd is None, changed(
+        "escnn", "escnn.group._numerical.randomized_svd is set again after agents imported it")
+
+    def like_scikit_learn(matrix, **kwargs):
+        raise TypeError("np.matrix is not supported")
+
+    monkeypatch.setattr(_numerical, "randomized_svd", like_scikit_learn)
+    use_exact_null_space()
+    basis = _numerical.null(np.matrix(np.diag([1.0, 0.0, 2.0])), use_sparse=False)
+    assert basis.shape == (3, 1) and abs(basis[1, 0]) == 1.0, changed(
+        "escnn", "_numerical.null no longer falls back to scipy when randomized_svd is None")
 
 
 # ------------------------------------------------------------------------- gymnasium

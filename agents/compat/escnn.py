@@ -8,7 +8,25 @@ from dataclasses import dataclass
 
 import torch
 from escnn import nn as enn
+from escnn.group import _numerical
 from escnn.nn.modules.basismanager import BlocksBasisExpansion
+
+
+def use_exact_null_space() -> None:
+    """Make escnn solve for bases (Clebsch-Gordan coefficients, intertwiners) with
+    scipy's exact SVD, also where scikit-learn is installed.
+
+    escnn 1.0.11 switches to scikit-learn's ``randomized_svd`` whenever it can import
+    it: then every group whose coefficients are not in escnn's disk cache fails to
+    build on scikit-learn >= 1.2, which refuses the ``np.matrix`` escnn passes it
+    (seen on a GPU machine whose image has scikit-learn), and where it does run, the
+    bases come from a random projection with no seed. Without scikit-learn escnn
+    uses scipy's SVD, which is what every test and run of this project used.
+
+    Private: the module attribute ``escnn.group._numerical.randomized_svd``, which
+    ``_numerical.null`` reads at each call (``None`` selects ``scipy.linalg.svd``).
+    """
+    _numerical.randomized_svd = None
 
 # The attribute (and so the state-dict key component) of an escnn ``Linear``'s
 # basis-expansion module. Private: escnn exposes the module only through the
