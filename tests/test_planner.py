@@ -35,7 +35,7 @@ class TransformedNoise(NoiseSource):
     def normal(self, shape, like):
         x = self.normals.pop(0)
         assert x.shape == shape
-        return x @ self.rho_a.to(x.dtype).T
+        return x @ self.rho_a.to(x).T
 
     def choice(self, probs):
         return self.choices.pop(0)
