@@ -28,6 +28,7 @@ before" ratios.
 
     python benchmarks/agent_speed.py [--threads 1] [--preset tdmpc] [--baseline /tmp/landed]
                                      [--only plain D8] [--tasks "pointmass3d 5 balls"]
+                                     [--devices cpu cuda]
 """
 
 from __future__ import annotations
@@ -104,14 +105,15 @@ from agents.run.envs import make_gym_env, torchrl_env
 from agents.run.trainer import REPLAY_KEYS
 from agents.tdmpc.replay import make_replay_buffer, sample_slices
 from agents.tdmpc.agent import TDMPCAgent
-task, repeats, overrides = sys.argv[2], int(sys.argv[3]), sys.argv[4:]
+task, repeats, device, overrides = sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5:]
+sync = torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
 with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
     cfg = compose("train", overrides=[f"env={task}", *overrides])
 options = RunOptions.from_config(OmegaConf.to_container(cfg, resolve=True))
 info = check_task(options)
 agent_cfg = options.agent
 env = torchrl_env(make_gym_env(options.env), options.env.action_repeat)
-agent = TDMPCAgent(agent_cfg, info.symmetry, info.observation_size, info.action_size)
+agent = TDMPCAgent(agent_cfg, info.symmetry, info.observation_size, info.action_size, device=device)
 buffer = make_replay_buffer(agent_cfg.replay, agent_cfg.horizon, agent_cfg.batch_size)
 td = env.rollout(1000, break_when_any_done=True)
 td.set("episode", torch.zeros(td.shape[0], dtype=torch.int64))
@@ -120,9 +122,11 @@ obs = td["observation"][0]
 def timed(fn):
     for _ in range(3):
         fn()
+    sync()
     start = time.perf_counter()
     for _ in range(repeats):
         fn()
+    sync()  # a GPU's queued kernels are part of the time
     return (time.perf_counter() - start) / repeats
 act = lambda: agent.act(obs, step=10**6, explore=True)
 learn = lambda: agent.update(sample_slices(buffer, agent_cfg.horizon))
@@ -148,7 +152,7 @@ flops = (dense_flops(m.encoder) + p.num_pi_trajs * h * (dense_flops(m.policy) + 
 hidden = next(x for x in agent.networks.dynamics.modules() if hasattr(x, "out_type")
               or isinstance(x, torch.nn.Linear))
 width = hidden.out_type.size if hasattr(hidden, "out_type") else hidden.out_features
-a, b = torch.randn(n, width), torch.randn(width, width)
+a, b = torch.randn(n, width, device=device), torch.randn(width, width, device=device)
 matmul = timed(lambda: a @ b)
 # The arithmetic actually done (matmul-type ops, by torch's own FLOP formulas) in one
 # plan and one update, untimed. A dispatch mode of our own: torch's FlopCounterMode
@@ -178,12 +182,14 @@ print(json.dumps({"plan": plan, "update": update, "width": width,
 
 
 def measure(tree: Path, task: str, overrides: list[str], threads: int, preset: str,
-            repeats: int) -> dict[str, float]:
+            repeats: int, device: str = "cpu") -> dict[str, float]:
     env, env_options = TASK_ENVS.get(task, (task, []))
-    out = subprocess.run([sys.executable, "-c", MEASURE, str(threads), env, str(repeats),
+    out = subprocess.run([sys.executable, "-c", MEASURE, str(threads), env, str(repeats), device,
                           f"agent={preset}", *env_options, *overrides],
                          cwd=tree, capture_output=True, text=True,
-                         env={**os.environ, "PYTHONPATH": str(tree), "RL_WARNINGS": "False"})
+                         env={**os.environ, "RL_WARNINGS": "False",  # the measured tree first
+                              "PYTHONPATH": os.pathsep.join(
+                                  filter(None, [str(tree), os.environ.get("PYTHONPATH")]))})
     if out.returncode != 0:
         raise SystemExit(f"measuring {task} {overrides} in {tree} failed:\n{out.stderr[-2000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -209,36 +215,54 @@ def main() -> None:
                              "label ('plain'), any other picks the labels containing it ('D8')")
     parser.add_argument("--tasks", nargs="*", default=TASKS, choices=TASKS, metavar="TASK",
                         help=f"measure only these tasks (default: all): {', '.join(TASKS)}")
+    parser.add_argument("--devices", nargs="+", default=["cpu"], metavar="DEVICE",
+                        help="measure each configuration on each of these (cpu, cuda) in the same "
+                             "round; with two, 'x <first>' is the step time's ratio to the first's")
+    parser.add_argument("--overrides", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="agent options added to every configuration, e.g. "
+                             "agent.replay.prioritized=false")
     args = parser.parse_args()
     import torch
 
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, torch {torch.__version__}, "
+    if any(d.startswith("cuda") for d in args.devices) and not torch.cuda.is_available():
+        parser.error(f"--devices {' '.join(args.devices)}: no CUDA device here; valid: cpu")
+    gpu = f", {torch.cuda.get_device_name()}" if torch.cuda.is_available() else ""
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores{gpu}, torch {torch.__version__}, "
           f"{args.threads} thread(s); agent preset {args.preset}\n")
     # Every configuration once per round, rounds repeated: a change in the machine's load
     # hits all of them alike, and each row reports its median over the rounds.
     selected = [c for c in CONFIGS if c[0] in args.tasks and (
         c[1] == "plain"  # every ratio's denominator
         or args.only is None or any(picks(word, c[1]) for word in args.only))]
-    runs: dict[tuple[str, str], list[dict[str, float]]] = {(t, lab): [] for t, lab, _ in selected}
+    runs: dict[tuple[str, str, str], list[dict[str, float]]] = {
+        (t, lab, d): [] for t, lab, _ in selected for d in args.devices}
     for _ in range(args.rounds):
         for task, label, overrides in selected:
-            runs[task, label].append(measure(ROOT, task, overrides, args.threads, args.preset,
-                                             args.repeats))
+            for device in args.devices:
+                runs[task, label, device].append(measure(
+                    ROOT, task, [*overrides, *args.overrides], args.threads, args.preset,
+                    args.repeats, device))
+    first = args.devices[0]
+    versus = f" | x {first} step" if len(args.devices) > 1 else ""
     print(f"median of {args.rounds} round(s); 'x plain step' per round in brackets\n")
-    print("| task | agent | hidden width | plan (ms) | update (ms) | agent step (ms) | x plain step "
-          "| GFLOP per step (x plain) | achieved GFLOP/s "
+    print("| task | agent | device | hidden width | plan (ms) | update (ms) | agent step (ms) "
+          f"| x plain step{versus} | GFLOP per step (x plain) | achieved GFLOP/s "
           "| planner GFLOP/s (dense-equivalent) | matmul GFLOP/s, same size |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
-    plain: dict[str, tuple[list[float], float]] = {}
-    for (task, label), rs in runs.items():
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if versus else ""))
+    plain: dict[tuple[str, str], tuple[list[float], float]] = {}
+    for (task, label, device), rs in runs.items():
         steps = [r["plan"] + r["update"] for r in rs]
-        plain.setdefault(task, (steps, rs[0]["step_gflop"]))
-        ratios = [a / b for a, b in zip(steps, plain[task][0])]
+        plain.setdefault((task, device), (steps, rs[0]["step_gflop"]))
+        ratios = [a / b for a, b in zip(steps, plain[task, device][0])]
         m = {key: median([r[key] for r in rs]) for key in rs[0]}
         spread = f" [{', '.join(f'{x:.2f}' for x in ratios)}]" if len(rs) > 1 else ""
-        print(f"| {task} | {label} | {rs[0]['width']} | {m['plan'] * 1e3:.1f} "
-              f"| {m['update'] * 1e3:.1f} | {median(steps) * 1e3:.1f} | {median(ratios):.2f}{spread} "
-              f"| {m['step_gflop']:.2f} ({m['step_gflop'] / plain[task][1]:.1f}) "
+        against = ""
+        if versus:  # per round, the same configuration on the first device
+            per_round = [a / (b["plan"] + b["update"]) for a, b in zip(steps, runs[task, label, first])]
+            against = f" | {median(per_round):.3f}"
+        print(f"| {task} | {label} | {device} | {rs[0]['width']} | {m['plan'] * 1e3:.1f} "
+              f"| {m['update'] * 1e3:.1f} | {median(steps) * 1e3:.1f} | {median(ratios):.2f}{spread}"
+              f"{against} | {m['step_gflop']:.2f} ({m['step_gflop'] / plain[task, device][1]:.1f}) "
               f"| {m['step_gflop'] / median(steps):.1f} "
               f"| {m['planner_gflops']:.1f} | {m['matmul_gflops']:.1f} |", flush=True)
     if args.baseline:
