@@ -188,7 +188,10 @@ PUBLISHED_MARKERS = ("D", "^", "s", "v", "P")
 
 
 def plot(groups: dict[str, list[Run]], out: Path, title: str,
-         references: list[tuple[float, str]], published: list[Published] = ()) -> None:
+         references: list[tuple[float, str]], published: list[Published] = (),
+         last_step: float = float("inf")) -> None:
+    """The curves with their 95% CIs; ``published`` results are drawn up to ``last_step``
+    (the longest run here)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -201,7 +204,6 @@ def plot(groups: dict[str, list[Run]], out: Path, title: str,
         ax.fill_between(steps, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
     for value, name in references:
         ax.axhline(value, color="black", linestyle="--", linewidth=1, label=name)
-    last_step = max(run.steps[-1] for runs in groups.values() for run in runs)
     for series, marker in zip(published, itertools.cycle(PUBLISHED_MARKERS)):
         points = [(step, value) for step, values in series.until(last_step).items()
                   for _, value in values]
@@ -295,11 +297,12 @@ def main(argv: list[str] | None = None) -> None:
         published = [read_published(spec) for spec in args.published]
     except ValueError as err:
         raise SystemExit(f"geomdp-plot: error: {err}") from None
+    last_step = max(run.steps[-1] for run in runs)  # published results are shown up to it
     if args.out:
-        plot(groups, args.out, args.title or default_title(args.paths), references, published)
+        plot(groups, args.out, args.title or default_title(args.paths), references, published,
+             last_step)
     text = table(groups, args.threshold)
     if published:
-        last_step = max(run.steps[-1] for run in runs)
         text += "\n\n" + published_table(published, last_step)
     if args.paired:
         text += "\n\n" + paired_table(groups, paired)
