@@ -236,12 +236,16 @@ def main() -> None:
         or args.only is None or any(picks(word, c[1]) for word in args.only))]
     runs: dict[tuple[str, str, str], list[dict[str, float]]] = {
         (t, lab, d): [] for t, lab, _ in selected for d in args.devices}
+    total, done = args.rounds * len(runs), 0
     for _ in range(args.rounds):
         for task, label, overrides in selected:
             for device in args.devices:
-                runs[task, label, device].append(measure(
-                    ROOT, task, [*overrides, *args.overrides], args.threads, args.preset,
-                    args.repeats, device))
+                r = measure(ROOT, task, [*overrides, *args.overrides], args.threads, args.preset,
+                            args.repeats, device)
+                runs[task, label, device].append(r)
+                done += 1  # progress, and the numbers so far if the table never comes
+                print(f"[{done}/{total}] {task} | {label} | {device}: agent step "
+                      f"{(r['plan'] + r['update']) * 1e3:.1f} ms", file=sys.stderr, flush=True)
     first = args.devices[0]
     versus = f" | x {first} step" if len(args.devices) > 1 else ""
     print(f"median of {args.rounds} round(s); 'x plain step' per round in brackets\n")
