@@ -24,11 +24,13 @@ warm-up, allocator or thread state, once per round over ``--rounds`` rounds
 alike); each row reports medians, and its ratio to the plain agent per round.
 ``--baseline DIR`` also measures the plain agent of another checkout (e.g.
 ``git worktree add /tmp/landed <commit>``) in the same run, for "faster than
-before" ratios.
+before" ratios. ``--devices cpu cuda`` measures every configuration on each device in the
+same round (a device column; ratios to plain within a device, and each row's ratio to the
+same configuration on the first device).
 
     python benchmarks/agent_speed.py [--threads 1] [--preset tdmpc] [--baseline /tmp/landed]
                                      [--only plain D8] [--tasks "pointmass3d 5 balls"]
-                                     [--devices cpu cuda]
+                                     [--devices cpu cuda] [--overrides KEY=VALUE ...]
 """
 
 from __future__ import annotations
@@ -200,6 +202,37 @@ def picks(word: str, label: str) -> bool:
     return word == label if word in LABELS else word in label
 
 
+def table(runs: dict[tuple[str, str, str], list[dict[str, float]]], devices: list[str]) -> str:
+    """The markdown table: per (task, agent, device) the medians over rounds and the step
+    time's ratio to that task's plain agent on the same device, per round in brackets;
+    with several devices also the median per-round ratio to the same agent on the first.
+    ``runs`` holds each task's plain agent first (the ratios' denominator)."""
+    first = devices[0]
+    versus = f" | x {first} step" if len(devices) > 1 else ""
+    lines = ["| task | agent | device | hidden width | plan (ms) | update (ms) | agent step (ms) "
+             f"| x plain step{versus} | GFLOP per step (x plain) | achieved GFLOP/s "
+             "| planner GFLOP/s (dense-equivalent) | matmul GFLOP/s, same size |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if versus else "")]
+    plain: dict[tuple[str, str], tuple[list[float], float]] = {}
+    for (task, label, device), rs in runs.items():
+        steps = [r["plan"] + r["update"] for r in rs]
+        plain.setdefault((task, device), (steps, rs[0]["step_gflop"]))
+        ratios = [a / b for a, b in zip(steps, plain[task, device][0])]
+        m = {key: median([r[key] for r in rs]) for key in rs[0]}
+        spread = f" [{', '.join(f'{x:.2f}' for x in ratios)}]" if len(rs) > 1 else ""
+        against = ""
+        if versus:  # per round, the same configuration on the first device
+            per_round = [a / (b["plan"] + b["update"]) for a, b in zip(steps, runs[task, label, first])]
+            against = f" | {median(per_round):.3f}"
+        lines.append(
+            f"| {task} | {label} | {device} | {rs[0]['width']} | {m['plan'] * 1e3:.1f} "
+            f"| {m['update'] * 1e3:.1f} | {median(steps) * 1e3:.1f} | {median(ratios):.2f}{spread}"
+            f"{against} | {m['step_gflop']:.2f} ({m['step_gflop'] / plain[task, device][1]:.1f}) "
+            f"| {m['step_gflop'] / median(steps):.1f} "
+            f"| {m['planner_gflops']:.1f} | {m['matmul_gflops']:.1f} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--threads", type=int, default=1)
@@ -216,17 +249,20 @@ def main() -> None:
     parser.add_argument("--tasks", nargs="*", default=TASKS, choices=TASKS, metavar="TASK",
                         help=f"measure only these tasks (default: all): {', '.join(TASKS)}")
     parser.add_argument("--devices", nargs="+", default=["cpu"], metavar="DEVICE",
-                        help="measure each configuration on each of these (cpu, cuda) in the same "
-                             "round; with two, 'x <first>' is the step time's ratio to the first's")
+                        help="measure each configuration on each of these (cpu, cuda, cuda:<n>) in "
+                             "the same round; with more than one, 'x <first> step' is the step "
+                             "time's ratio to the same configuration on the first")
     parser.add_argument("--overrides", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="agent options added to every configuration, e.g. "
+                        help="Hydra overrides added to every configuration (and the baseline), e.g. "
                              "agent.replay.prioritized=false")
     args = parser.parse_args()
+    args.devices = list(dict.fromkeys(args.devices))
     import torch
 
-    if any(d.startswith("cuda") for d in args.devices) and not torch.cuda.is_available():
+    gpus = [d for d in args.devices if d.startswith("cuda")]
+    if gpus and not torch.cuda.is_available():
         parser.error(f"--devices {' '.join(args.devices)}: no CUDA device here; valid: cpu")
-    gpu = f", {torch.cuda.get_device_name()}" if torch.cuda.is_available() else ""
+    gpu = "".join(f", {d}: {torch.cuda.get_device_name(torch.device(d))}" for d in gpus)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores{gpu}, torch {torch.__version__}, "
           f"{args.threads} thread(s); agent preset {args.preset}\n")
     # Every configuration once per round, rounds repeated: a change in the machine's load
@@ -246,37 +282,16 @@ def main() -> None:
                 done += 1  # progress, and the numbers so far if the table never comes
                 print(f"[{done}/{total}] {task} | {label} | {device}: agent step "
                       f"{(r['plan'] + r['update']) * 1e3:.1f} ms", file=sys.stderr, flush=True)
-    first = args.devices[0]
-    versus = f" | x {first} step" if len(args.devices) > 1 else ""
     print(f"median of {args.rounds} round(s); 'x plain step' per round in brackets\n")
-    print("| task | agent | device | hidden width | plan (ms) | update (ms) | agent step (ms) "
-          f"| x plain step{versus} | GFLOP per step (x plain) | achieved GFLOP/s "
-          "| planner GFLOP/s (dense-equivalent) | matmul GFLOP/s, same size |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if versus else ""))
-    plain: dict[tuple[str, str], tuple[list[float], float]] = {}
-    for (task, label, device), rs in runs.items():
-        steps = [r["plan"] + r["update"] for r in rs]
-        plain.setdefault((task, device), (steps, rs[0]["step_gflop"]))
-        ratios = [a / b for a, b in zip(steps, plain[task, device][0])]
-        m = {key: median([r[key] for r in rs]) for key in rs[0]}
-        spread = f" [{', '.join(f'{x:.2f}' for x in ratios)}]" if len(rs) > 1 else ""
-        against = ""
-        if versus:  # per round, the same configuration on the first device
-            per_round = [a / (b["plan"] + b["update"]) for a, b in zip(steps, runs[task, label, first])]
-            against = f" | {median(per_round):.3f}"
-        print(f"| {task} | {label} | {device} | {rs[0]['width']} | {m['plan'] * 1e3:.1f} "
-              f"| {m['update'] * 1e3:.1f} | {median(steps) * 1e3:.1f} | {median(ratios):.2f}{spread}"
-              f"{against} | {m['step_gflop']:.2f} ({m['step_gflop'] / plain[task, device][1]:.1f}) "
-              f"| {m['step_gflop'] / median(steps):.1f} "
-              f"| {m['planner_gflops']:.1f} | {m['matmul_gflops']:.1f} |", flush=True)
+    print(table(runs, args.devices), flush=True)
     if args.baseline:
         # Alternating rounds, so that a change in the machine's load hits both alike;
         # the medians are reported.
         before, after = [], []
         for _ in range(args.rounds):
             for tree, out in ((args.baseline, before), (ROOT, after)):
-                r = measure(tree, "pointmass2d", ["agent.group=none"], args.threads,
-                            args.preset, args.repeats)
+                r = measure(tree, "pointmass2d", ["agent.group=none", *args.overrides],
+                            args.threads, args.preset, args.repeats, args.devices[0])
                 out.append((r["plan"] + r["update"], r["plan"], r["update"]))
         (b, bp, bu), (a, ap, au) = sorted(before)[len(before) // 2], sorted(after)[len(after) // 2]
         print(f"\nplain PointMass2D agent step, median of {args.rounds} alternating rounds: "

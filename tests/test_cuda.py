@@ -62,10 +62,12 @@ def test_planner_on_cuda_is_equivariant(env_id, kwargs, group, element, randomis
         np.testing.assert_allclose(b.cpu().numpy(), sym.transform_action(a.cpu().numpy(), g), atol=1e-8)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("group, prioritized", [("none", "true"), ("D4", "false")])
 def test_a_run_moves_between_cuda_and_cpu_at_its_checkpoint(tmp_path, group, prioritized):
     """Trained on the GPU to 1000 steps, continued on the CPU to 2000, then on the GPU
-    to 3000: each start resumes the last (no second evaluation at a step), and it learns."""
+    to 3000: each start resumes the last (no second evaluation at a step), with finite
+    losses and a target network that tracks the online one."""
     agent = [f"agent.group={group}", f"agent.replay.prioritized={prioritized}"]
     assert run(config("device=cuda", "train.steps=1000", *agent), tmp_path) == 0
     assert run(config("device=cpu", "train.steps=2000", *agent), tmp_path) == 0

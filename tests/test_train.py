@@ -268,11 +268,6 @@ def test_plain_agent_on_any_gymnasium_env(tmp_path):
     assert q[1] < 2 * q[0] < 0 and all(float(r["td_target_mean"]) < -10 for r in train), train
 
 
-@pytest.mark.skipif(not os.environ.get("GEOMDP_TEST_CUDA"), reason="set GEOMDP_TEST_CUDA=1 on a GPU")
-def test_cuda(tmp_path):
-    assert run(config("device=cuda", "agent.group=D4"), tmp_path) == 0
-
-
 @pytest.mark.slow
 def test_progress_bar_shows_returns_for_people(tmp_path, capsys):
     assert run(config("train.progress=true", "train.steps=1000"), tmp_path) == 0

@@ -189,9 +189,9 @@ PUBLISHED_MARKERS = ("D", "^", "s", "v", "P")
 
 def plot(groups: dict[str, list[Run]], out: Path, title: str,
          references: list[tuple[float, str]], published: list[Published] = (),
-         last_step: float = float("inf")) -> None:
+         last_step: float | None = None) -> None:
     """The curves with their 95% CIs; ``published`` results are drawn up to ``last_step``
-    (the longest run here)."""
+    (default: the longest run in ``groups``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -204,6 +204,8 @@ def plot(groups: dict[str, list[Run]], out: Path, title: str,
         ax.fill_between(steps, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
     for value, name in references:
         ax.axhline(value, color="black", linestyle="--", linewidth=1, label=name)
+    if last_step is None:
+        last_step = max(run.steps[-1] for runs in groups.values() for run in runs)
     for series, marker in zip(published, itertools.cycle(PUBLISHED_MARKERS)):
         points = [(step, value) for step, values in series.until(last_step).items()
                   for _, value in values]

@@ -28,6 +28,9 @@ def use_exact_null_space() -> None:
     """
     _numerical.randomized_svd = None
 
+
+use_exact_null_space()  # on import: every module of agents that builds escnn layers imports this one
+
 # The attribute (and so the state-dict key component) of an escnn ``Linear``'s
 # basis-expansion module. Private: escnn exposes the module only through the
 # read-only property ``Linear.basisexpansion``, and state-dict keys carry the
