@@ -40,6 +40,7 @@ from agents.compat.escnn import (
 from agents.compat.torch import ConversionHook, TorchDispatchMode, child_modules, parameter_table
 from agents.compat.torchrl import (
     expect_target_updater,
+    prioritized_replay_available,
     priority_state,
     restore_priority_state,
 )
@@ -249,6 +250,14 @@ def test_agent_target_lag_is_bit_identical_to_the_foreach_formula(group, device)
 
 
 # --------------------------------------------------------------------------- torchrl
+
+
+def test_torchrl_extension_loads_with_the_pinned_torch():
+    """Prioritised replay (the default) needs TorchRL's compiled segment trees; the run
+    refuses it without them (tests/test_train.py), so with the pinned pair they must load."""
+    assert prioritized_replay_available(), changed(
+        "torchrl", f"its compiled extension (torchrl._torchrl) does not load with torch "
+                   f"{torch.__version__}: prioritised replay cannot run")
 
 
 def _filled_buffer(seed=0, prioritized=True):

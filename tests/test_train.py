@@ -227,6 +227,20 @@ def test_bad_input_fails_fast_with_one_clear_line(overrides, message, tmp_path, 
     assert time.time() - start < 30
 
 
+def test_prioritized_replay_without_torchrls_extension_is_refused_before_the_run(tmp_path, capsys,
+                                                                                 monkeypatch):
+    """TorchRL's compiled extension loads only with the torch it was built for; without it
+    a prioritised sampler fails after the run has started. Refused up front instead."""
+    import agents.run.config
+
+    monkeypatch.setattr(agents.run.config, "prioritized_replay_available", lambda: False)
+    assert run(config(), tmp_path / "run") == 2
+    (err,) = capsys.readouterr().err.strip().splitlines()
+    assert err.startswith("geomdp-train: error: agent.replay.prioritized=true needs TorchRL's "
+                          "compiled extension") and "agent.replay.prioritized=false" in err
+    assert not (tmp_path / "run").exists()
+
+
 @pytest.mark.slow
 def test_bad_input_on_the_command_line_exits_2_and_leaves_no_directory(tmp_path):
     """The same through the console script: Hydra makes the run directory before the

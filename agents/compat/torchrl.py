@@ -9,6 +9,21 @@ from torchrl.data import PrioritizedSampler
 from torchrl.objectives import LossModule
 
 
+def prioritized_replay_available() -> bool:
+    """Whether TorchRL's compiled extension, whose segment trees prioritised replay needs,
+    loads here. It loads only against the torch its wheel was built for (torchrl 0.14.1:
+    torch 2.14.1); otherwise TorchRL warns once at import and fails when a prioritised
+    sampler is made, after the run has started (seen on a GPU image with torch 2.11).
+
+    Private: the module ``torchrl._torchrl`` (the extension) and its ``SumSegmentTreeFp32``.
+    """
+    try:
+        from torchrl._torchrl import SumSegmentTreeFp32  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def priority_state(sampler: PrioritizedSampler, n: int) -> dict[str, Any]:
     """The priorities of slots ``[0, n)`` of ``sampler`` and the priority it gives new
     data (``{"sum", "min", "max"}``), for ``restore_priority_state``.
