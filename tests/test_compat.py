@@ -502,7 +502,8 @@ def test_escnn_solves_null_spaces_with_scipy_even_beside_scikit_learn(monkeypatc
     """escnn switches to scikit-learn's randomized SVD whenever it can import it, and
     scikit-learn >= 1.2 refuses the np.matrix escnn passes (a GPU machine's image had
     it: no D8 network could be built there). use_exact_null_space, called when
-    agents.nn.escnn_groups is imported, puts escnn back on scipy's exact SVD."""
+    agents.compat.escnn is imported (every module of agents that builds escnn layers
+    imports it), puts escnn back on scipy's exact SVD."""
     from escnn.group import _numerical
 
     # In a fresh process, as if scikit-learn were installed: importing the agent's groups

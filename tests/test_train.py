@@ -230,15 +230,21 @@ def test_bad_input_fails_fast_with_one_clear_line(overrides, message, tmp_path, 
 def test_prioritized_replay_without_torchrls_extension_is_refused_before_the_run(tmp_path, capsys,
                                                                                  monkeypatch):
     """TorchRL's compiled extension loads only with the torch it was built for; without it
-    a prioritised sampler fails after the run has started. Refused up front instead."""
-    import agents.run.config
+    a prioritised sampler fails after the run has started. Refused up front instead, and
+    by the buffer's maker too (the same line), for code that builds an agent itself."""
+    import agents.compat.torchrl
+    from agents.tdmpc.replay import ReplayConfig, make_replay_buffer
 
-    monkeypatch.setattr(agents.run.config, "prioritized_replay_available", lambda: False)
+    monkeypatch.setattr(agents.compat.torchrl, "prioritized_replay_available", lambda: False)
     assert run(config(), tmp_path / "run") == 2
     (err,) = capsys.readouterr().err.strip().splitlines()
     assert err.startswith("geomdp-train: error: agent.replay.prioritized=true needs TorchRL's "
                           "compiled extension") and "agent.replay.prioritized=false" in err
     assert not (tmp_path / "run").exists()
+    with pytest.raises(ValueError) as refused:
+        make_replay_buffer(ReplayConfig(capacity=8), horizon=2, batch_size=2)
+    assert f"geomdp-train: error: {refused.value}" == err
+    make_replay_buffer(ReplayConfig(capacity=8, prioritized=False), horizon=2, batch_size=2)
 
 
 @pytest.mark.slow

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 import torch
+import torchrl
 from torchrl.data import PrioritizedSampler
 from torchrl.objectives import LossModule
 
@@ -22,6 +23,16 @@ def prioritized_replay_available() -> bool:
     except ImportError:
         return False
     return True
+
+
+def prioritized_replay_refusal() -> str | None:
+    """Why prioritised replay cannot run here, in one line naming the choices, or None
+    where it can. Checked before a run starts and again where a buffer is made."""
+    if prioritized_replay_available():
+        return None
+    return (f"agent.replay.prioritized=true needs TorchRL's compiled extension, which does not "
+            f"load here (torchrl {torchrl.__version__} with torch {torch.__version__}): install "
+            "the pinned torch (pyproject.toml), or use agent.replay.prioritized=false")
 
 
 def priority_state(sampler: PrioritizedSampler, n: int) -> dict[str, Any]:

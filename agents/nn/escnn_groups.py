@@ -41,12 +41,10 @@ from escnn import group as escnn_group
 from escnn import gspaces
 from escnn import nn as enn
 
-from agents.compat.escnn import use_exact_null_space
+import agents.compat.escnn  # noqa: F401  (on import: escnn solves for bases with scipy's exact SVD)
 from agents.nn import spectral
 from geomdp_envs import groups as env_groups
 from geomdp_envs.symmetry import Field, Symmetry, rep_matrix
-
-use_exact_null_space()  # before any group is built (also done when agents.compat.escnn is imported)
 
 PLANAR_GROUPS = ("C4", "C8", "C16", "D4", "D8", "D16")  # the paper's; any C<N>/D<N> works
 SPATIAL_GROUPS = ("octahedral", "icosahedral")

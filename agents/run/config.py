@@ -14,9 +14,8 @@ from typing import Any
 
 import gymnasium
 import torch
-import torchrl
 
-from agents.compat.torchrl import prioritized_replay_available
+from agents.compat.torchrl import prioritized_replay_refusal
 from agents.nn.escnn_groups import group_for_task
 from agents.options import OptionError, check, from_dict, option
 from agents.run.envs import TASK_ENVS, EnvOptions, make_gym_env
@@ -205,11 +204,8 @@ def check_task(options: RunOptions) -> Task:
     neither its device nor its task.)"""
     if options.device.startswith("cuda") and not torch.cuda.is_available():
         raise OptionError(f"device={options.device} but no CUDA device is available; use device=cpu")
-    if options.agent.replay.prioritized and not prioritized_replay_available():
-        raise OptionError(f"agent.replay.prioritized=true needs TorchRL's compiled extension, which "
-                          f"does not load here (torchrl {torchrl.__version__} with torch "
-                          f"{torch.__version__}): install the pinned torch (pyproject.toml), or use "
-                          "agent.replay.prioritized=false")
+    if options.agent.replay.prioritized and (refusal := prioritized_replay_refusal()):
+        raise OptionError(refusal)
     if options.logger.tensorboard is True and importlib.util.find_spec("tensorboard") is None:
         raise OptionError("logger.tensorboard=true but the tensorboard package is not installed "
                           "(pip install tensorboard); use logger.tensorboard=auto or false")

@@ -15,7 +15,7 @@ from torchrl.data import (
     TensorDictReplayBuffer,
 )
 
-from agents.compat.torchrl import priority_state, restore_priority_state
+from agents.compat.torchrl import prioritized_replay_refusal, priority_state, restore_priority_state
 from agents.options import check, option
 
 EPISODE_KEY = "episode"
@@ -37,6 +37,8 @@ def make_replay_buffer(config: ReplayConfig, horizon: int, batch_size: int,
                        device: torch.device | str = "cpu") -> TensorDictReplayBuffer:
     """A buffer whose ``sample()`` returns ``batch_size`` slices of ``horizon`` steps,
     never crossing an episode boundary (transitions carry an ``episode`` id)."""
+    if config.prioritized and (refusal := prioritized_replay_refusal()):
+        raise ValueError(refusal)  # rather than TorchRL's error from inside its sampler
     common = dict(slice_len=horizon, traj_key=EPISODE_KEY, strict_length=True)
     if config.prioritized:
         sampler = PrioritizedSliceSampler(max_capacity=config.capacity, alpha=config.alpha,
