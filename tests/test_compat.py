@@ -309,6 +309,35 @@ def test_torchrl_priority_state_round_trips_exactly(tmp_path):
         "torchrl", "writing PrioritizedSampler._max_priority does not set the sampler's maximum")
 
 
+@pytest.mark.parametrize("within", [False, True])
+def test_new_data_gets_the_largest_priority_ever_or_the_largest_held(within, tmp_path):
+    """agent.replay.max_priority_within_buffer: TorchRL's default gives new slots the largest
+    priority ever written; TD-MPC's buffer the largest among the slots it holds. Kept by a
+    checkpoint's save and load."""
+    config = ReplayConfig(capacity=64, max_priority_within_buffer=within)
+
+    def extend(buffer, episode, length):
+        buffer.extend(TensorDict({"observation": torch.zeros(length, 2),
+                                  "episode": torch.full((length,), episode)}, [length]))
+
+    buffer = make_replay_buffer(config, horizon=3, batch_size=4)
+    extend(buffer, 0, 10)
+    buffer.update_priority(torch.arange(10), torch.where(torch.arange(10) == 4, 50.0, 1.0))
+    buffer.update_priority(torch.tensor([4]), torch.tensor([2.0]))  # the largest one lowered
+    save_replay(buffer, tmp_path / "replay.pt")
+    loaded = make_replay_buffer(config, horizon=3, batch_size=4)
+    load_replay(loaded, tmp_path / "replay.pt")
+    for b in (buffer, loaded):
+        extend(b, 1, 5)
+        with internal("torchrl", "PrioritizedSampler._sum_tree"):
+            tree = priority_state(b.sampler, 15)["sum"]
+        ratio = float(tree[10] / tree[4])  # a new slot against the slot that now holds 2.0
+        expected = 1.0 if within else 25.0 ** config.alpha
+        assert ratio == pytest.approx(expected, rel=1e-4), changed(
+            "torchrl", f"new data's priority with max_priority_within_buffer={within}: "
+                       f"{ratio:.3f} x the held maximum, expected {expected:.3f}")
+
+
 def test_torchrl_expect_target_updater():
     from torchrl._utils import rl_warnings
 

@@ -114,3 +114,31 @@ def test_a_wrong_step_weight_is_detected() -> None:
         want = reference_losses(loss, batch)
     assert not torch.allclose(got["loss_model"], want["loss_model"], rtol=1e-3)
     assert F.l1_loss(got["priority"], want["priority"]) > 1e-4
+
+
+@pytest.mark.parametrize("group", ["none", "D4"])
+def test_straight_through_passes_the_gradient_of_pis_mean_where_the_domain_clips(group: str) -> None:
+    """agent.loss.straight_through (TD-MPC's): pi's noisy action has the same value, and its
+    gradient is the mean's, also where the projection onto the action domain clips it;
+    without it the projection's own gradient (zero where a coordinate is clipped) stays."""
+    loss = make_loss(group)
+    model = loss.model
+    with torch.no_grad():  # a policy pushed to the edge of the domain, so that noise leaves it
+        for p in model.policy.net[-1].parameters():
+            p.mul_(30.0)
+        z = model.encode(torch.randn(64, 4, generator=torch.Generator().manual_seed(5)))
+    z.requires_grad_(True)
+    noise = torch.randn(64, model.action_dim, generator=torch.Generator().manual_seed(6))
+
+    def gradient_and_value(straight_through: bool, std: float = 1.0):
+        model.straight_through = straight_through
+        action = model.pi(z, std, noise)
+        (grad,) = torch.autograd.grad(action.sum(), z)
+        return grad, action.detach()
+
+    mean_grad, _ = gradient_and_value(False, std=0.0)
+    through, value = gradient_and_value(True)
+    clipped, same_value = gradient_and_value(False)
+    torch.testing.assert_close(value, same_value, rtol=0, atol=0)
+    torch.testing.assert_close(through, mean_grad)
+    assert (clipped - mean_grad).abs().max() > 1e-3, "the projection clipped nothing: no test"

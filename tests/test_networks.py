@@ -9,8 +9,10 @@ import torch
 
 from agents import Architecture, NetworkConfig, build_networks, group_for_task, make_group, squash
 from agents.nn.layers import EquivariantLinear, FieldLayerNorm
-from agents.nn.networks import project
+from agents.nn.layout import layout_size
+from agents.nn.networks import project, regular_copies
 from agents.nn.parameters import submodules
+from agents.options import OptionError
 from geomdp_envs import groups
 from geomdp_envs.declare import declare
 
@@ -365,3 +367,101 @@ def test_submodules_walks_like_modules(group):
     shared = torch.nn.ModuleList([nets.encoder, nets.qs, nets.encoder])
     for module in [*nets.modules().values(), shared]:
         assert [id(m) for m in submodules(module)] == [id(m) for m in module.modules()]
+
+
+# TD-MPC's own network choices (issue 37's step 4), each an option of agent.networks.
+TDMPC_LIKE = replace(SMALL, encoder_layers=1, encoder_dim=12, layer_norm="q_input")
+
+
+def layer_kinds(net):
+    """The hidden blocks' module names, in order: Linear/EquivariantLinear -> 'linear'."""
+    names = []
+    for m in net.net:
+        name = type(m).__name__
+        names.append("linear" if name in ("Linear", "EquivariantLinear", "SplitLinear",
+                                          "FourierLinear") else name)
+    return names
+
+
+@pytest.mark.parametrize("group_name, task", [(None, "reacher"), ("D8", "reacher"),
+                                              ("icosahedral", "pointmass3d"), ("SO3", "pointmass3d")])
+def test_tdmpc_layer_norm_placement_and_encoder_depth(group_name, task):
+    """layer_norm=q_input: LayerNorm and tanh after the Q's first layer only, activation alone
+    elsewhere; encoder_layers/encoder_dim shape the encoder alone."""
+    nets = build_networks(NetworkConfig(group=group_name, width_strategy="linear",
+                                        networks=TDMPC_LIKE, allow_approximate=True),
+                          task_symmetry(task))
+    norm = "FieldLayerNorm" if group_name != "SO3" else "SpectralLayerNorm"
+    act = "ELU" if group_name != "SO3" else "GridActivation"
+    tanh = "Tanh" if group_name != "SO3" else "GridActivation"
+    assert layer_kinds(nets.encoder) == ["linear", act, "linear"]
+    for head in (nets.dynamics, nets.reward, nets.policy):
+        assert layer_kinds(head) == ["linear", act, "linear", act, "linear"]
+    for q in nets.qs:
+        assert layer_kinds(q) == ["linear", norm, tanh, "linear", act, "linear"]
+        if group_name == "SO3":
+            assert isinstance(q.net[2].function, torch.nn.Tanh)
+    widths = [layout_size(head.net[0].out_features if group_name is None else head.net[0].out_type)
+              for head in (nets.encoder, nets.dynamics)]
+    field = 1 if group_name is None else nets.group.field_size
+    assert widths == [field * (12 if group_name is None else regular_copies(12, nets.group, "linear")),
+                      field * (24 if group_name is None else regular_copies(24, nets.group, "linear"))]
+
+
+@pytest.mark.parametrize("group_name, task", [("D8", "reacher"), ("C8", "pointmass2d"),
+                                              ("icosahedral", "pointmass3d")])
+def test_tdmpc_layout_networks_are_equivariant(group_name, task, randomise_heads):
+    sym = task_symmetry(task)
+    nets = randomise_heads(build_networks(
+        NetworkConfig(group=group_name, width_strategy="linear", networks=TDMPC_LIKE), sym))
+    torch.manual_seed(0)
+    for name, net in nets.modules().items():
+        for head in (net if name == "qs" else [net]):
+            x = torch.randn(32, head.in_layout.size)
+            y = head(x)
+            for e in elements_of(nets.group):
+                err = relative_error(head(x @ rep(head.in_layout, e).T), y @ rep(head.out_layout, e).T)
+                assert err < 1e-4, f"{name} not equivariant to {e}: relative error {err:.1e}"
+
+
+def test_orthogonal_init_is_tdmpcs_and_plain_only():
+    sym = task_symmetry("reacher")
+    torch.manual_seed(0)
+    nets = build_networks(NetworkConfig(networks=replace(SMALL, init="orthogonal")), sym)
+    for name, net in nets.modules().items():
+        for head in (net if name == "qs" else [net]):
+            linears = [m for m in head.net if isinstance(m, torch.nn.Linear)]
+            zeroed = name in ("reward", "qs")
+            for i, layer in enumerate(linears):
+                w = layer.weight.detach()
+                if zeroed and i == len(linears) - 1:  # TD-MPC's zero output layers still
+                    assert not w.any() and not layer.bias.any()
+                    continue
+                gram = w @ w.T if w.shape[0] <= w.shape[1] else w.T @ w
+                torch.testing.assert_close(gram, torch.eye(len(gram)), atol=1e-5, rtol=0)
+                assert not layer.bias.any(), f"{name}: biases start at zero"
+    with pytest.raises(OptionError, match="agent.networks.init=orthogonal applies to plain layers"):
+        NetworkConfig(group="D8", networks=replace(SMALL, init="orthogonal"))
+    # a plain component beside an equivariant one is still refused: one rule per agent
+    with pytest.raises(OptionError, match="use agent.networks.init=default"):
+        NetworkConfig(group="D8", equivariant={"q": False},
+                      networks=replace(SMALL, init="orthogonal"))
+    NetworkConfig(group="D8", equivariant=dict.fromkeys(("transition", "q", "policy"), False),
+                  networks=replace(SMALL, init="orthogonal"))
+
+
+def test_the_default_architecture_is_unchanged_by_the_tdmpc_options():
+    """The defaults keep LayerNorm before every activation and every head's depth and
+    width (the committed runs' networks): same modules, same initial weights."""
+    sym = task_symmetry("reacher")
+    torch.manual_seed(3)
+    default = build_networks(NetworkConfig(networks=SMALL), sym)
+    torch.manual_seed(3)
+    spelled = build_networks(NetworkConfig(networks=replace(
+        SMALL, encoder_layers=2, encoder_dim=24, layer_norm="every", init="default")), sym)
+    for name, net in default.modules().items():
+        assert str(net) == str(spelled.modules()[name])
+        for (key, a), (_, b) in zip(net.state_dict().items(), spelled.modules()[name].state_dict().items(),
+                                    strict=True):
+            assert torch.equal(a, b), f"{name}.{key}"
+    assert layer_kinds(default.encoder) == ["linear", "FieldLayerNorm", "ELU"] * 2 + ["linear"]

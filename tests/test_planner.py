@@ -59,6 +59,7 @@ def _make_agent(env_id, kwargs, group, randomise_heads):
         "group": group, "networks": {"hidden_dim": 32, "latent_dim": 16},
         "planner": {"num_samples": 64, "num_elites": 8, "num_pi_trajs": 8, "iterations": 3},
         "horizon": 3, "batch_size": 8})
+    torch.manual_seed(0)  # the same networks whichever tests ran before
     agent = TDMPCAgent(cfg, sym, sym.observation_size, sym.action_size)
     randomise_heads(agent.networks)
     agent.model.double()
@@ -126,8 +127,10 @@ def test_value_is_invariant_and_policy_action_equivariant(env_id, kwargs, group,
     value, action = agent.value(obs), agent.policy_action(obs)
     assert value.shape == (3,) and value.dtype == torch.float64
     np.testing.assert_allclose(agent.value(moved).numpy(), value.numpy(), atol=1e-8)
+    # escnn's bases are float32 (a double model holds them rounded), so equivariance holds
+    # to float32's relative precision, not double's
     np.testing.assert_allclose(agent.policy_action(moved).numpy(),
-                               sym.transform_action(action.numpy(), g), atol=1e-8)
+                               sym.transform_action(action.numpy(), g), rtol=1e-6, atol=1e-8)
     z = agent.model.encode(obs)
     q = agent.model.q(z, agent.model.pi(z))
     assert q.shape[0] == agent.config.networks.num_q

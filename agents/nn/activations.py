@@ -53,7 +53,7 @@ class ELU(nn.Module):
 
 
 ACTIVATIONS: dict[str, type[nn.Module]] = {"mish": nn.Mish, "elu": ELU, "relu": nn.ReLU,
-                                           "silu": nn.SiLU}
+                                           "silu": nn.SiLU, "tanh": nn.Tanh}
 
 
 def activation(name: str) -> nn.Module:

@@ -250,14 +250,18 @@ class FieldLayerNorm(ScopedExpansion):
         return F.layer_norm(x, (self.size,), weight, bias, self.eps)
 
 
-def norm_and_activation(layout: Layout, activation_name: str,
-                        grid: Quadrature | None = None) -> list[nn.Module]:
-    """LayerNorm then the nonlinearity, for a hidden layout: pointwise on plain and
-    regular fields; on band-limited fields of a continuous group, LayerNorm of their
-    functions (exact) and the nonlinearity sampled on ``grid`` (``agents/nn/spectral.py``)."""
-    if is_pointwise(layout):
-        return [FieldLayerNorm(layout), activation(activation_name)]
-    if grid is None:
+def norm_and_activation(layout: Layout, activation_name: str, grid: Quadrature | None = None,
+                        layer_norm: bool = True) -> list[nn.Module]:
+    """LayerNorm (unless ``layer_norm`` is false) then the nonlinearity, for a hidden layout:
+    pointwise on plain and regular fields; on band-limited fields of a continuous group,
+    LayerNorm of their functions (exact) and the nonlinearity sampled on ``grid``
+    (``agents/nn/spectral.py``)."""
+    pointwise = is_pointwise(layout)
+    if not pointwise and grid is None:
         raise ValueError("band-limited fields need a quadrature grid for their nonlinearity")
-    return [SpectralLayerNorm(layout, grid), GridActivation(layout, activation(activation_name),
-                                                            grid)]
+    blocks: list[nn.Module] = []
+    if layer_norm:
+        blocks.append(FieldLayerNorm(layout) if pointwise else SpectralLayerNorm(layout, grid))
+    function = activation(activation_name)
+    blocks.append(function if pointwise else GridActivation(layout, function, grid))
+    return blocks

@@ -35,6 +35,9 @@ from geomdp_envs.symmetry import Field, Symmetry
 
 WIDTH_STRATEGIES = ("sqrt", "linear")
 COMPONENTS = ("transition", "q", "policy")
+HEADS = ("encoder", "dynamics", "reward", "q", "policy")
+LAYER_NORMS = ("every", "q_input")
+INITS = ("default", "orthogonal")
 
 
 @dataclass
@@ -55,9 +58,34 @@ class Architecture:
     # nonlinearities sample a grid exact to grid_frequency (null: agents.nn.escnn_groups' defaults).
     max_frequency: int | None = None
     grid_frequency: int | None = None
+    # Where this agent departs from TD-MPC's networks, each restorable on its own (issue 37,
+    # docs/tdmpc_differences.md). The encoder's hidden layers and width (null: as every other
+    # head's; TD-MPC: 1 layer of 256 beside 512 elsewhere).
+    encoder_layers: int | None = option(None, low=1)
+    encoder_dim: int | None = option(None, low=1)
+    # every: LayerNorm before every hidden nonlinearity; q_input: TD-MPC's, only after the
+    # Q's first layer, followed by tanh there (the other heads: linear and activation only).
+    layer_norm: str = option("every", choices=LAYER_NORMS)
+    # default: PyTorch's and escnn's; orthogonal: TD-MPC's (orthogonal weights, zero biases),
+    # for plain layers only (escnn's basis coefficients have no orthogonal rule).
+    init: str = option("default", choices=INITS)
 
     def __post_init__(self) -> None:
         check(self)
+
+    def head_depth_and_width(self, head: str) -> tuple[int, int]:
+        """The hidden layers and plain width of a head (``encoder`` or another)."""
+        if head == "encoder":
+            return (self.encoder_layers or self.hidden_layers, self.encoder_dim or self.hidden_dim)
+        return self.hidden_layers, self.hidden_dim
+
+    def hidden_blocks(self, head: str) -> list[tuple[bool, str]]:
+        """(LayerNorm or not, nonlinearity) of each of a head's hidden layers."""
+        depth, _ = self.head_depth_and_width(head)
+        if self.layer_norm == "every":
+            return [(True, self.activation)] * depth
+        return [(head == "q" and i == 0, "tanh" if head == "q" and i == 0 else self.activation)
+                for i in range(depth)]
 
 
 @dataclass
@@ -92,6 +120,10 @@ class NetworkConfig:
             raise OptionError("agent.equivariant: an equivariant Q or policy needs an "
                               "equivariant latent state: make the transition (encoder, dynamics, "
                               "reward) equivariant too")
+        if self.networks.init == "orthogonal" and self.group is not None and any(use.values()):
+            raise OptionError(f"{key(Architecture, 'init')}=orthogonal applies to plain layers "
+                              f"only (agent.group=none); equivariant layers have no orthogonal "
+                              f"rule: use {key(Architecture, 'init')}=default")
 
     def linear_kind(self) -> str:
         """The hidden layers' kind once ``auto`` is decided."""
@@ -108,20 +140,21 @@ def regular_copies(width: int, group: AgentGroup, strategy: str) -> int:
 
 
 class FieldMLP(nn.Module):
-    """Linear -> LayerNorm -> activation blocks, then a linear output layer.
+    """Linear -> LayerNorm -> activation blocks (LayerNorm where ``layer_norms`` says),
+    then a linear output layer.
 
     Plain when the layouts are sizes, equivariant when they are field types.
     Takes and returns plain tensors [..., size].
     """
 
     def __init__(self, in_layout: Layout, hidden: list[Layout], out_layout: Layout,
-                 activation_name: str = "elu", linear_kind: str = "dense",
-                 grid: Quadrature | None = None) -> None:
+                 activation_names: list[str], layer_norms: list[bool],
+                 linear_kind: str = "dense", grid: Quadrature | None = None) -> None:
         super().__init__()
         layers, previous = [], in_layout
-        for layout in hidden:
+        for layout, name, norm in zip(hidden, activation_names, layer_norms, strict=True):
             layers += [make_linear(previous, layout, kind=linear_kind),
-                       *norm_and_activation(layout, activation_name, grid)]
+                       *norm_and_activation(layout, name, grid, layer_norm=norm)]
             previous = layout
         layers.append(make_linear(previous, out_layout, kind=linear_kind))
         self.net = nn.Sequential(*layers)
@@ -141,6 +174,17 @@ class FieldMLP(nn.Module):
                 p.zero_()
         return self
 
+    def orthogonal_init(self) -> FieldMLP:
+        """TD-MPC's initialisation: orthogonal weights, zero biases (plain layers only)."""
+        if not isinstance(self.in_layout, int):
+            raise TypeError("orthogonal initialisation is defined for plain networks only")
+        with torch.no_grad():
+            for layer in self.net:
+                if isinstance(layer, nn.Linear):
+                    nn.init.orthogonal_(layer.weight)
+                    nn.init.zeros_(layer.bias)
+        return self
+
 
 class Space:
     """The layouts one component works with: plain sizes, or field types of a group."""
@@ -150,7 +194,6 @@ class Space:
         self.group, self.config = group, config
         self.observation = self._declared(observation)
         self.action = self._declared(action)
-        self.hidden = self.regular(config.networks.hidden_dim)
         self.latent = self.regular(config.networks.latent_dim)
         self.scalar = self.trivial(1)
 
@@ -168,10 +211,15 @@ class Space:
     def trivial(self, n: int) -> Layout:
         return n if self.group is None else self.group.gspace.type(*[self.group.trivial] * n)
 
-    def mlp(self, in_layout: Layout, out_layout: Layout) -> FieldMLP:
+    def mlp(self, head: str, in_layout: Layout, out_layout: Layout) -> FieldMLP:
+        """The network of one of TD-MPC's ``HEADS``, as ``agent.networks`` shapes it."""
+        architecture = self.config.networks
         grid = None if self.group is None else self.group.quadrature
-        return FieldMLP(in_layout, [self.hidden] * self.config.networks.hidden_layers, out_layout,
-                        self.config.networks.activation, self.config.linear_kind(), grid)
+        depth, width = architecture.head_depth_and_width(head)
+        norms, activations = zip(*architecture.hidden_blocks(head), strict=True)
+        network = FieldMLP(in_layout, [self.regular(width)] * depth, out_layout, list(activations),
+                           list(norms), self.config.linear_kind(), grid)
+        return network.orthogonal_init() if architecture.init == "orthogonal" else network
 
 
 def squash(x: torch.Tensor, fields: tuple[Field, ...]) -> torch.Tensor:
@@ -267,11 +315,11 @@ def build_networks(config: NetworkConfig, symmetry: Symmetry | None,
     t, q, p = spaces["transition"], spaces["q"], spaces["policy"]
     q.latent, p.latent = as_seen_by("q", latent), as_seen_by("policy", latent)
     return Networks(
-        encoder=t.mlp(t.observation, latent),
-        dynamics=t.mlp(concat(latent, t.action), latent),
-        reward=t.mlp(concat(latent, t.action), t.scalar).zero_output_layer(),
-        qs=nn.ModuleList(q.mlp(concat(q.latent, q.action), q.scalar).zero_output_layer()
+        encoder=t.mlp("encoder", t.observation, latent),
+        dynamics=t.mlp("dynamics", concat(latent, t.action), latent),
+        reward=t.mlp("reward", concat(latent, t.action), t.scalar).zero_output_layer(),
+        qs=nn.ModuleList(q.mlp("q", concat(q.latent, q.action), q.scalar).zero_output_layer()
                          for _ in range(config.networks.num_q)),
-        policy=p.mlp(p.latent, p.action),
+        policy=p.mlp("policy", p.latent, p.action),
         group=group, exact=exact, config=config, action_fields=action,
     )

@@ -107,8 +107,8 @@ class TDMPCAgent:
         self.observation_size, self.action_size = observation_size, action_size
         self.networks = build_networks(config, symmetry, observation_size, action_size)
         self.action_fields = self.networks.action_fields
-        self.model = WorldModel(self.networks, self.action_fields,
-                                noise_clip=config.loss.noise_clip).to(self.device)
+        self.model = WorldModel(self.networks, self.action_fields, noise_clip=config.loss.noise_clip,
+                                straight_through=config.loss.straight_through).to(self.device)
         self.loss = TDMPCLoss(self.model, config.loss).to(self.device)
         self.target_updater = SoftUpdate(self.loss, tau=config.tau)
         policy_params = list(self.model.policy.parameters())

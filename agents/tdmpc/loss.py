@@ -49,6 +49,10 @@ class LossConfig:
     policy_noise: float = option(0.05, low=0)
     # TD-MPC clips that noise to +-0.3 (by norm for a vector field)
     noise_clip: float = option(0.3, low=0, low_open=True)
+    # The policy loss's gradient through the projection of pi's noisy action onto the action
+    # domain: false, the projection's own (zero where it clips); true, TD-MPC's straight-through
+    # (as if nothing were clipped)
+    straight_through: bool = False
 
     def __post_init__(self) -> None:
         check(self)

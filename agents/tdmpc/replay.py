@@ -28,6 +28,9 @@ class ReplayConfig:
     prioritized: bool = True  # TD-MPC's prioritised replay
     alpha: float = option(0.6, low=0)  # priority exponent (0: uniform)
     beta: float = option(0.4, low=0, high=1)  # importance-sampling exponent
+    # New data's priority: false, the largest ever given (TorchRL's default); true, the
+    # largest among the slots the buffer holds (TD-MPC's)
+    max_priority_within_buffer: bool = False
 
     def __post_init__(self) -> None:
         check(self)
@@ -42,7 +45,9 @@ def make_replay_buffer(config: ReplayConfig, horizon: int, batch_size: int,
     common = dict(slice_len=horizon, traj_key=EPISODE_KEY, strict_length=True)
     if config.prioritized:
         sampler = PrioritizedSliceSampler(max_capacity=config.capacity, alpha=config.alpha,
-                                          beta=config.beta, **common)
+                                          beta=config.beta,
+                                          max_priority_within_buffer=config.max_priority_within_buffer,
+                                          **common)
     else:
         sampler = SliceSampler(**common)
     return TensorDictReplayBuffer(storage=LazyTensorStorage(config.capacity, device=device),

@@ -20,9 +20,9 @@ class WorldModel(nn.Module):
     """
 
     def __init__(self, networks: Networks, action_fields: tuple[Field, ...],
-                 noise_clip: float = 0.3) -> None:
+                 noise_clip: float = 0.3, straight_through: bool = False) -> None:
         super().__init__()
-        self.noise_clip = noise_clip
+        self.noise_clip, self.straight_through = noise_clip, straight_through
         self.encoder = networks.encoder
         self.dynamics = networks.dynamics
         self.reward_net = networks.reward
@@ -56,10 +56,12 @@ class WorldModel(nn.Module):
 
         As TD-MPC's truncated normal: the noise is clipped to ``noise_clip`` (by norm
         for a vector field, which keeps the clip equivariant), and the sum is
-        projected back onto the action domain.
+        projected back onto the action domain; with ``straight_through`` the gradient
+        passes that projection as if it were the identity (TD-MPC's; equivariant too).
         """
         mean = squash(self.policy(z), self.action_fields)
         if std <= 0 or noise is None:
             return mean
-        clipped = project(std * noise, self.action_fields, radius=self.noise_clip)
-        return project(mean + clipped, self.action_fields)
+        noisy = mean + project(std * noise, self.action_fields, radius=self.noise_clip)
+        action = project(noisy, self.action_fields)
+        return noisy + (action - noisy).detach() if self.straight_through else action
