@@ -44,6 +44,7 @@ from agents.compat.torchrl import (
     priority_state,
     restore_priority_state,
 )
+from agents.options import OptionError
 from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig, rebuilt_with_networks
 from agents.tdmpc.replay import (
     ReplayConfig,
@@ -336,6 +337,8 @@ def test_new_data_gets_the_largest_priority_ever_or_the_largest_held(within, tmp
         assert ratio == pytest.approx(expected, rel=1e-4), changed(
             "torchrl", f"new data's priority with max_priority_within_buffer={within}: "
                        f"{ratio:.3f} x the held maximum, expected {expected:.3f}")
+    with pytest.raises(OptionError, match="needs agent.replay.prioritized=true"):
+        ReplayConfig(prioritized=False, max_priority_within_buffer=True)
 
 
 def test_torchrl_expect_target_updater():

@@ -190,3 +190,17 @@ def test_continuous_group_names_and_options_are_checked():
         make_group("SO3", max_frequency=0)
     with pytest.raises(ValueError, match="is a continuous group: it has no order"):
         make_group("SO2").order  # noqa: B018
+
+
+def test_tdmpc_layout_is_exact_on_grid_rotations_and_bounded_elsewhere(randomise_heads):
+    """agent.networks.layer_norm=q_input with a continuous group: the Q's tanh (and every
+    ELU, without LayerNorm) is sampled on the grid as any nonlinearity, so rotations that map
+    the grid to itself stay exact and the others keep the default layout's bound."""
+    nets = networks("SO2", randomise_heads, layer_norm="q_input", encoder_layers=1)
+    assert [type(m).__name__ for m in nets.qs[0].net][1:3] == ["SpectralLayerNorm", "GridActivation"]
+    n = len(nets.group.quadrature)
+    on_grid = [nets.group.element(groups.rotation_2d(2 * np.pi * k / n)) for k in (1, 5, 11)]
+    for name, net in (("encoder", nets.encoder), ("dynamics", nets.dynamics), ("q", nets.qs[0]),
+                      ("policy", nets.policy)):
+        assert equivariance_error(net, on_grid) < 1e-6, name
+        assert equivariance_error(net, random_elements(nets.group)) < 3e-2, name

@@ -142,3 +142,12 @@ def test_straight_through_passes_the_gradient_of_pis_mean_where_the_domain_clips
     torch.testing.assert_close(value, same_value, rtol=0, atol=0)
     torch.testing.assert_close(through, mean_grad)
     assert (clipped - mean_grad).abs().max() > 1e-3, "the projection clipped nothing: no test"
+
+
+def test_the_agent_passes_straight_through_to_its_model() -> None:
+    from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
+
+    for flag in (False, True):
+        config = TDMPCConfig.from_dict({"networks": {"hidden_dim": 16, "latent_dim": 8},
+                                        "loss": {"straight_through": flag}, "batch_size": 4})
+        assert TDMPCAgent(config, None, 4, 2).model.straight_through is flag

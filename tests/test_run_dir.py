@@ -3,12 +3,15 @@ run really used."""
 
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from test_train import TINY, TRAIN, config
 
 from agents.cli.train import run
 from agents.run.run_dir import RunDirLock
+
+REPO = Path(__file__).resolve().parent.parent
 
 pytestmark = pytest.mark.slow  # every test trains an agent or starts geomdp-train
 
@@ -38,21 +41,48 @@ def test_a_refused_resume_leaves_the_runs_records_untouched(tmp_path):
     assert {p: p.read_bytes() for p in records} == records
 
 
-def test_a_run_made_before_an_option_existed_resumes(tmp_path):
-    """A run directory and checkpoint from before ``agent.augment`` existed resume
-    (the option's no-op default is filled in: ``agents.run.nested.ADDED_LATER``)."""
+def test_a_run_made_before_its_options_existed_resumes(tmp_path):
+    """A run directory and checkpoint from before ``agent.augment`` and TD-MPC's own choices
+    (``agent.networks.layer_norm``, ...) existed resume (each option's no-op default is
+    filled in: ``agents.run.nested.ADDED_LATER``)."""
     import json
 
     import yaml
 
+    from agents.run.nested import ADDED_LATER
+
     assert run(config("train.steps=1000"), tmp_path) == 0
     saved = yaml.safe_load((tmp_path / "config.yaml").read_text())
-    del saved["agent"]["augment"]
-    (tmp_path / "config.yaml").write_text(yaml.safe_dump(saved))
     manifest = json.loads((tmp_path / "checkpoint/manifest.json").read_text())
-    del manifest["options"]["agent.augment"]
+    removed = [k for k in ADDED_LATER if k in manifest["options"]]
+    assert "agent.networks.layer_norm" in removed and "agent.augment" in removed
+    for dotted in removed:
+        *path, last = dotted.split(".")
+        section = saved
+        for part in path:
+            section = section[part]
+        del section[last]
+        del manifest["options"][dotted]
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(saved))
     (tmp_path / "checkpoint/manifest.json").write_text(json.dumps(manifest))
     assert run(config("train.steps=2000"), tmp_path) == 0
+
+
+def test_every_option_newer_than_the_step_4_comparators_is_filled_in(tmp_path):
+    """Issue 37's step 4 pairs new runs with rung 1's (commit daa8c48): every option a run
+    records today that rung 1's config.yaml lacks has its no-op default in ADDED_LATER, so
+    that geomdp-plot groups them by the options they were made with."""
+    import yaml
+
+    from agents.run.nested import ADDED_LATER, flatten
+
+    assert run(config("train.steps=1000"), tmp_path) == 0
+    today = flatten(yaml.safe_load((tmp_path / "config.yaml").read_text()))
+    rung1 = flatten(yaml.safe_load((REPO / "results/fidelity/rung1_schedule/plain/seed1/config.yaml")
+                                   .read_text()))
+    newer = {k for k in today if k not in rung1 and not k.startswith("env.")}
+    assert newer and newer <= set(ADDED_LATER), sorted(newer - set(ADDED_LATER))
+    assert all(today[k] == ADDED_LATER[k] for k in newer)
 
 
 def test_the_cli_writes_records_only_for_an_accepted_run(tmp_path):

@@ -122,8 +122,9 @@ class NetworkConfig:
                               "reward) equivariant too")
         if self.networks.init == "orthogonal" and self.group is not None and any(use.values()):
             raise OptionError(f"{key(Architecture, 'init')}=orthogonal applies to plain layers "
-                              f"only (agent.group=none); equivariant layers have no orthogonal "
-                              f"rule: use {key(Architecture, 'init')}=default")
+                              f"only (agent.group=none, or every component of agent.equivariant "
+                              f"false); equivariant layers have no orthogonal rule: use "
+                              f"{key(Architecture, 'init')}=default")
 
     def linear_kind(self) -> str:
         """The hidden layers' kind once ``auto`` is decided."""

@@ -19,7 +19,12 @@ def flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 # Options added after runs were already made, with the value that reproduces those runs:
 # filled into an older run's options before comparing or grouping, so that it resumes
 # and plots beside newer runs. Add a key here whenever an option is added.
-ADDED_LATER = {"agent.augment": "none", "env.symmetry": None}
+ADDED_LATER = {"agent.augment": "none", "env.symmetry": None,
+               # TD-MPC's own choices (issue 37, step 4), off for every earlier run
+               "agent.networks.encoder_layers": None, "agent.networks.encoder_dim": None,
+               "agent.networks.layer_norm": "every", "agent.networks.init": "default",
+               "agent.loss.straight_through": False,
+               "agent.replay.max_priority_within_buffer": False}
 
 
 def with_added_later(flat: dict[str, Any]) -> dict[str, Any]:

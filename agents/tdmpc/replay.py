@@ -16,7 +16,7 @@ from torchrl.data import (
 )
 
 from agents.compat.torchrl import prioritized_replay_refusal, priority_state, restore_priority_state
-from agents.options import check, option
+from agents.options import OptionError, check, key, option
 
 EPISODE_KEY = "episode"
 
@@ -34,6 +34,10 @@ class ReplayConfig:
 
     def __post_init__(self) -> None:
         check(self)
+        if self.max_priority_within_buffer and not self.prioritized:
+            raise OptionError(f"{key(ReplayConfig, 'max_priority_within_buffer')}=true needs "
+                              f"{key(ReplayConfig, 'prioritized')}=true (uniform replay has no "
+                              "priorities)")
 
 
 def make_replay_buffer(config: ReplayConfig, horizon: int, batch_size: int,

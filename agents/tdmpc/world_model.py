@@ -64,4 +64,6 @@ class WorldModel(nn.Module):
             return mean
         noisy = mean + project(std * noise, self.action_fields, radius=self.noise_clip)
         action = project(noisy, self.action_fields)
-        return noisy + (action - noisy).detach() if self.straight_through else action
+        if not self.straight_through:
+            return action
+        return noisy - noisy.detach() + action.detach()  # exactly ``action``, noisy's gradient
