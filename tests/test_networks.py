@@ -50,6 +50,22 @@ def relative_error(a, b):
     return ((a - b).norm() / b.norm().clamp_min(1e-12)).item()
 
 
+def heads(nets):
+    """(name, network) of every head, each Q of the ensemble on its own."""
+    for name, net in nets.modules().items():
+        yield from ((f"{name}{i}", q) for i, q in enumerate(net)) if name == "qs" else [(name, net)]
+
+
+def assert_every_head_equivariant(nets):
+    torch.manual_seed(0)
+    for name, net in heads(nets):
+        x = torch.randn(32, net.in_layout.size)
+        y = net(x)
+        for e in elements_of(nets.group):
+            err = relative_error(net(x @ rep(net.in_layout, e).T), y @ rep(net.out_layout, e).T)
+            assert err < 1e-4, f"{name} not equivariant to {e}: relative error {err:.1e}"
+
+
 CASES = [(g, "pointmass2d") for g in ("C4", "C8", "C16", "D4", "D8", "D16")] + \
         [("D8", "reacher"), ("C8", "reacher"), ("D1", "pointmass2d")] + \
         [("D8", "reacher_v5"), ("D1", "inverted_pendulum_v5")] + \
@@ -61,17 +77,8 @@ CASES = [(g, "pointmass2d") for g in ("C4", "C8", "C16", "D4", "D8", "D16")] + \
 def test_every_network_is_equivariant_for_every_group_element(group_name, task, strategy,
                                                             randomise_heads):
     sym = task_symmetry(task)
-    nets = randomise_heads(build_networks(
-        NetworkConfig(group=group_name, width_strategy=strategy, networks=SMALL), sym))
-    torch.manual_seed(0)
-    heads = {"encoder": nets.encoder, "dynamics": nets.dynamics, "reward": nets.reward,
-             "q0": nets.qs[0], "q1": nets.qs[1], "policy": nets.policy}
-    for name, net in heads.items():
-        x = torch.randn(32, net.in_layout.size)
-        y = net(x)
-        for e in elements_of(nets.group):
-            err = relative_error(net(x @ rep(net.in_layout, e).T), y @ rep(net.out_layout, e).T)
-            assert err < 1e-4, f"{name} not equivariant to {e}: relative error {err:.1e}"
+    assert_every_head_equivariant(randomise_heads(build_networks(
+        NetworkConfig(group=group_name, width_strategy=strategy, networks=SMALL), sym)))
 
 
 @pytest.mark.parametrize("group_name, task, outside", [
@@ -411,35 +418,26 @@ def test_tdmpc_layer_norm_placement_and_encoder_depth(group_name, task):
 @pytest.mark.parametrize("group_name, task", [("D8", "reacher"), ("C8", "pointmass2d"),
                                               ("icosahedral", "pointmass3d")])
 def test_tdmpc_layout_networks_are_equivariant(group_name, task, randomise_heads):
-    sym = task_symmetry(task)
-    nets = randomise_heads(build_networks(
-        NetworkConfig(group=group_name, width_strategy="linear", networks=TDMPC_LIKE), sym))
-    torch.manual_seed(0)
-    for name, net in nets.modules().items():
-        for head in (net if name == "qs" else [net]):
-            x = torch.randn(32, head.in_layout.size)
-            y = head(x)
-            for e in elements_of(nets.group):
-                err = relative_error(head(x @ rep(head.in_layout, e).T), y @ rep(head.out_layout, e).T)
-                assert err < 1e-4, f"{name} not equivariant to {e}: relative error {err:.1e}"
+    assert_every_head_equivariant(randomise_heads(build_networks(
+        NetworkConfig(group=group_name, width_strategy="linear", networks=TDMPC_LIKE),
+        task_symmetry(task))))
 
 
 def test_orthogonal_init_is_tdmpcs_and_plain_only():
     sym = task_symmetry("reacher")
     torch.manual_seed(0)
     nets = build_networks(NetworkConfig(networks=replace(SMALL, init="orthogonal")), sym)
-    for name, net in nets.modules().items():
-        for head in (net if name == "qs" else [net]):
-            linears = [m for m in head.net if isinstance(m, torch.nn.Linear)]
-            zeroed = name in ("reward", "qs")
-            for i, layer in enumerate(linears):
-                w = layer.weight.detach()
-                if zeroed and i == len(linears) - 1:  # TD-MPC's zero output layers still
-                    assert not w.any() and not layer.bias.any()
-                    continue
-                gram = w @ w.T if w.shape[0] <= w.shape[1] else w.T @ w
-                torch.testing.assert_close(gram, torch.eye(len(gram)), atol=1e-5, rtol=0)
-                assert not layer.bias.any(), f"{name}: biases start at zero"
+    for name, head in heads(nets):
+        linears = [m for m in head.net if isinstance(m, torch.nn.Linear)]
+        zeroed = name.startswith(("reward", "qs"))
+        for i, layer in enumerate(linears):
+            w = layer.weight.detach()
+            if zeroed and i == len(linears) - 1:  # TD-MPC's zero output layers still
+                assert not w.any() and not layer.bias.any()
+                continue
+            gram = w @ w.T if w.shape[0] <= w.shape[1] else w.T @ w
+            torch.testing.assert_close(gram, torch.eye(len(gram)), atol=1e-5, rtol=0)
+            assert not layer.bias.any(), f"{name}: biases start at zero"
     with pytest.raises(OptionError, match="agent.networks.init=orthogonal applies to plain layers"):
         NetworkConfig(group="D8", networks=replace(SMALL, init="orthogonal"))
     # a plain component beside an equivariant one is still refused: one rule per agent

@@ -35,7 +35,6 @@ from geomdp_envs.symmetry import Field, Symmetry
 
 WIDTH_STRATEGIES = ("sqrt", "linear")
 COMPONENTS = ("transition", "q", "policy")
-HEADS = ("encoder", "dynamics", "reward", "q", "policy")
 LAYER_NORMS = ("every", "q_input")
 INITS = ("default", "orthogonal")
 
@@ -73,19 +72,17 @@ class Architecture:
     def __post_init__(self) -> None:
         check(self)
 
-    def head_depth_and_width(self, head: str) -> tuple[int, int]:
-        """The hidden layers and plain width of a head (``encoder`` or another)."""
+    def hidden_blocks(self, head: str) -> tuple[int, list[tuple[bool, str]]]:
+        """A head's plain hidden width and, per hidden layer, (LayerNorm or not, nonlinearity);
+        ``head`` is ``encoder``, ``dynamics``, ``reward``, ``q`` or ``policy``."""
         if head == "encoder":
-            return (self.encoder_layers or self.hidden_layers, self.encoder_dim or self.hidden_dim)
-        return self.hidden_layers, self.hidden_dim
-
-    def hidden_blocks(self, head: str) -> list[tuple[bool, str]]:
-        """(LayerNorm or not, nonlinearity) of each of a head's hidden layers."""
-        depth, _ = self.head_depth_and_width(head)
+            depth, width = self.encoder_layers or self.hidden_layers, self.encoder_dim or self.hidden_dim
+        else:
+            depth, width = self.hidden_layers, self.hidden_dim
         if self.layer_norm == "every":
-            return [(True, self.activation)] * depth
-        return [(head == "q" and i == 0, "tanh" if head == "q" and i == 0 else self.activation)
-                for i in range(depth)]
+            return width, [(True, self.activation)] * depth
+        tdmpc_q_input = [head == "q" and i == 0 for i in range(depth)]
+        return width, [(first, "tanh" if first else self.activation) for first in tdmpc_q_input]
 
 
 @dataclass
@@ -141,19 +138,19 @@ def regular_copies(width: int, group: AgentGroup, strategy: str) -> int:
 
 
 class FieldMLP(nn.Module):
-    """Linear -> LayerNorm -> activation blocks (LayerNorm where ``layer_norms`` says),
-    then a linear output layer.
+    """Linear -> LayerNorm -> activation blocks (``blocks``: per hidden layer, LayerNorm or
+    not and the nonlinearity's name), then a linear output layer.
 
     Plain when the layouts are sizes, equivariant when they are field types.
     Takes and returns plain tensors [..., size].
     """
 
     def __init__(self, in_layout: Layout, hidden: list[Layout], out_layout: Layout,
-                 activation_names: list[str], layer_norms: list[bool],
-                 linear_kind: str = "dense", grid: Quadrature | None = None) -> None:
+                 blocks: list[tuple[bool, str]], linear_kind: str = "dense",
+                 grid: Quadrature | None = None) -> None:
         super().__init__()
         layers, previous = [], in_layout
-        for layout, name, norm in zip(hidden, activation_names, layer_norms, strict=True):
+        for layout, (norm, name) in zip(hidden, blocks, strict=True):
             layers += [make_linear(previous, layout, kind=linear_kind),
                        *norm_and_activation(layout, name, grid, layer_norm=norm)]
             previous = layout
@@ -216,10 +213,9 @@ class Space:
         """The network of one of TD-MPC's ``HEADS``, as ``agent.networks`` shapes it."""
         architecture = self.config.networks
         grid = None if self.group is None else self.group.quadrature
-        depth, width = architecture.head_depth_and_width(head)
-        norms, activations = zip(*architecture.hidden_blocks(head), strict=True)
-        network = FieldMLP(in_layout, [self.regular(width)] * depth, out_layout, list(activations),
-                           list(norms), self.config.linear_kind(), grid)
+        width, blocks = architecture.hidden_blocks(head)
+        network = FieldMLP(in_layout, [self.regular(width)] * len(blocks), out_layout, blocks,
+                           self.config.linear_kind(), grid)
         return network.orthogonal_init() if architecture.init == "orthogonal" else network
 
 
