@@ -210,7 +210,8 @@ class Space:
         return n if self.group is None else self.group.gspace.type(*[self.group.trivial] * n)
 
     def mlp(self, head: str, in_layout: Layout, out_layout: Layout) -> FieldMLP:
-        """The network of one of TD-MPC's ``HEADS``, as ``agent.networks`` shapes it."""
+        """The network of one of TD-MPC's heads (encoder, dynamics, reward, q, policy), as
+        ``agent.networks`` shapes it."""
         architecture = self.config.networks
         grid = None if self.group is None else self.group.quadrature
         width, blocks = architecture.hidden_blocks(head)
