@@ -180,6 +180,41 @@ def test_plot_contrasts_margins_of_two_experiments(tmp_path, capsys):
                    "plain hard", "D8 easy", "plain easy"])
 
 
+def test_plot_from_step_leaves_out_earlier_evaluations_everywhere(tmp_path, capsys):
+    # plain: a short warm-up; D8: a long one (zeros until 2000), then ahead
+    for seed, (plain, d8) in enumerate([([0, 500, 500, 600], [0, 0, 900, 1000]),
+                                        ([0, 300, 400, 500], [0, 0, 800, 900])], start=1):
+        write_run(tmp_path / f"none/{seed}", "none", seed, plain)
+        write_run(tmp_path / f"D8/{seed}", "D8", seed, d8)
+    plot.main([str(tmp_path), "--paired", "group=none", "--threshold", "800",
+               "--contrast", "group=D8", "group=none", "group=D8", "group=none"])
+    everything = capsys.readouterr().out
+    # over all evaluations: seed 1 475 − 400 = +75, seed 2 425 − 300 = +125
+    assert "| 2 | 1: +75.0, 2: +125.0 | +100.0 [" in everything
+    plot.main([str(tmp_path), "--paired", "group=none", "--threshold", "800", "--runs",
+               "--contrast", "group=D8", "group=none", "group=D8", "group=none",
+               "--from-step", "2000", "--out", str(tmp_path / "late.png")])
+    late = capsys.readouterr().out
+    # from 2000 on: seed 1 950 − 550 = +400, seed 2 850 − 450 = +400
+    assert "| 2 | 1: +400.0, 2: +400.0 | +400.0 [+400.0, +400.0] |" in late
+    assert "| group=D8 | 2 | 3000 | 950.0 [900.0, 1000.0] | 950.0 | 900.0 [850.0, 950.0] |" in late
+    assert "| 2000, 2000 |" in late  # steps to 800 count from 2000
+    for header in ("| mean return over evaluations from env step 2000 on (mean, 95% CI) |",
+                   "| per-seed difference, mean return over evaluations from env step 2000 on |",
+                   "| first margin, mean return over evaluations from env step 2000 on (95% CI) |"):
+        assert header in late and header not in everything
+    assert "| group=D8 | 1 | 900 1000 |" in late  # the runs table too
+    run = results.find_runs([tmp_path / "D8/1"])[0]
+    assert list(run.from_step(1000).steps) == [1000, 2000, 3000]
+    assert list(run.from_step(2500).returns) == [1000.0]
+    write_run(tmp_path / "D8/3", "D8", 3, [0, 0])  # unfinished: nothing from 2000 on
+    with pytest.raises(SystemExit, match=r"--from-step 2000: .*D8/3 has no evaluation at or "
+                                         r"after it \(its last is at env step 1000\); --complete"):
+        plot.main([str(tmp_path), "--from-step", "2000"])
+    plot.main([str(tmp_path), "--from-step", "2000", "--complete", "2000"])
+    assert "| group=D8 | 2 |" in capsys.readouterr().out
+
+
 def test_plot_title_defaults_to_the_folder_the_runs_share(tmp_path):
     runs = [tmp_path / "sweep" / agent / "seed1" for agent in ("plain", "D8")]
     assert plot.default_title(runs) == "sweep"

@@ -16,7 +16,9 @@ every group against that one seed by seed (differences, bootstrap CI, paired t-t
 repeat it to compare against several groups, each pair once); with ``--contrast A B C D``,
 whether A's margin over B is larger than C's over D (e.g. the same agents on two tasks);
 with ``--runs``, one row per run: its evaluations, wall time and the invariants of a
-working TD learner (``agents.run.td_invariants``), failures named.
+working TD learner (``agents.run.td_invariants``), failures named. ``--from-step STEP``
+keeps only the evaluations from STEP on, everywhere (e.g. agents whose warm-ups differ,
+compared after the longest one).
 
 Runs are found and grouped by ``agents.run.results`` and their statistics computed by
 ``agents.run.statistics``; this module is the command line, the tables and the figure.
@@ -60,9 +62,13 @@ def require_groups(option: str, names: list[str], groups: dict[str, list[Run]]) 
                          f"{', '.join(groups)}")
 
 
-def table(groups: dict[str, list[Run]], thresholds: list[float]) -> str:
+ALL_EVALUATIONS = "all evaluations"
+
+
+def table(groups: dict[str, list[Run]], thresholds: list[float],
+          evaluations: str = ALL_EVALUATIONS) -> str:
     header = ("| runs | seeds | env steps | final return (mean, 95% CI) | IQM "
-              "| mean return over all evaluations (mean, 95% CI) "
+              f"| mean return over {evaluations} (mean, 95% CI) "
               "| final return with training noise (mean, 95% CI) |")
     sep = "|---|---|---|---|---|---|---|"
     for threshold in thresholds:
@@ -89,14 +95,15 @@ def table(groups: dict[str, list[Run]], thresholds: list[float]) -> str:
     return "\n".join(rows)
 
 
-def paired_table(groups: dict[str, list[Run]], baselines: list[str]) -> str:
+def paired_table(groups: dict[str, list[Run]], baselines: list[str],
+                 evaluations: str = ALL_EVALUATIONS) -> str:
     """Every group against each of ``baselines``, seed by seed (runs of the same seed
     pair): the per-seed differences of the mean return over all evaluations (the area
     under the curve) and of the final return, their mean with a 95% bootstrap CI, a
     paired t-test and on how many seeds the group did better. Only seeds both groups have
     count; a pair already compared (the other way round) is not repeated."""
     require_groups("--paired", baselines, groups)
-    rows = ["| comparison | seeds | per-seed difference, mean return over all evaluations "
+    rows = [f"| comparison | seeds | per-seed difference, mean return over {evaluations} "
             "| mean difference (95% CI) | paired t-test p | better on | final return: mean "
             "difference (95% CI), p |", "|---|---|---|---|---|---|---|"]
     compared: set[frozenset[str]] = set()
@@ -120,13 +127,14 @@ def paired_row(comparison: str, pairs: list[tuple[object, Run, Run]]) -> str:
             f"{signed(mean_ci(final))}, {paired_p(final)} |")
 
 
-def contrast_table(groups: dict[str, list[Run]], contrasts: list[list[str]]) -> str:
+def contrast_table(groups: dict[str, list[Run]], contrasts: list[list[str]],
+                   evaluations: str = ALL_EVALUATIONS) -> str:
     """``--contrast A B C D``: is A's margin over B larger than C's over D? E.g. D8 over
     plain on Reacher hard against D8 over plain on easy. Each margin is paired by seed
     within its own pair of groups; the two sets of per-seed margins come from different
     experiments, so they are compared unpaired: the difference of their means with a 95%
     bootstrap CI and Welch's t-test."""
-    rows = ["| contrast | seeds | first margin, mean return over all evaluations (95% CI) "
+    rows = [f"| contrast | seeds | first margin, mean return over {evaluations} (95% CI) "
             "| second margin (95% CI) | first − second (95% CI) | Welch t-test p "
             "| final return: first − second (95% CI), p |", "|---|---|---|---|---|---|---|"]
     for names in contrasts:
@@ -281,6 +289,10 @@ def main(argv: list[str] | None = None) -> None:
                         help="another project's per-seed returns (CSV: algorithm, task, seed, "
                              "env_step, episode_reward) as markers and a table, e.g. "
                              "results/published/reacher.csv:tdmpc:reacher-hard; repeatable")
+    parser.add_argument("--from-step", type=int, default=None, metavar="STEP",
+                        help="use only the evaluations at this env step or later in the tables "
+                             "and the figure (e.g. 25000: compare agents after warm-ups of "
+                             "different lengths); steps to a threshold count from it too")
     parser.add_argument("--runs", action="store_true",
                         help="also list every run: evaluations, wall time, TD learner invariants")
     args = parser.parse_args(argv)
@@ -288,6 +300,16 @@ def main(argv: list[str] | None = None) -> None:
     if not runs:
         raise SystemExit(f"geomdp-plot: error: no run directories (eval.csv + config.yaml) under "
                          f"{', '.join(map(str, args.paths))}")
+    evaluations = ALL_EVALUATIONS
+    if args.from_step is not None:
+        short = next((r for r in runs if r.steps[-1] < args.from_step), None)
+        if short is not None:
+            raise SystemExit(f"geomdp-plot: error: --from-step {args.from_step}: {short.path} has "
+                             f"no evaluation at or after it (its last is at env step "
+                             f"{int(short.steps[-1])}); --complete {args.from_step} leaves such "
+                             "runs out")
+        runs = [r.from_step(args.from_step) for r in runs]
+        evaluations = f"evaluations from env step {args.from_step} on"
     groups = group_runs(runs, tuple(args.ignore))
     renamed = rename_groups(groups, args.label)
     paired = [renamed.get(b, b) for b in args.paired]
@@ -303,14 +325,14 @@ def main(argv: list[str] | None = None) -> None:
     if args.out:
         plot(groups, args.out, args.title or default_title(args.paths), references, published,
              last_step)
-    text = table(groups, args.threshold)
+    text = table(groups, args.threshold, evaluations)
     if published:
         text += "\n\n" + published_table(published, last_step)
     if args.paired:
-        text += "\n\n" + paired_table(groups, paired)
+        text += "\n\n" + paired_table(groups, paired, evaluations)
     if args.contrast:
         text += "\n\n" + contrast_table(groups, [[renamed.get(n, n) for n in names]
-                                                  for names in args.contrast])
+                                                  for names in args.contrast], evaluations)
     if args.runs:
         text += "\n\n" + runs_table(groups)
     print(text)

@@ -10,7 +10,7 @@ libraries.
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +30,13 @@ class Run:
     steps: np.ndarray
     returns: np.ndarray
     noisy_returns: np.ndarray  # with the training noise (NaN where not logged)
+
+    def from_step(self, step: int) -> Run:
+        """The run with only its evaluations at ``step`` or later (e.g. to compare agents
+        after warm-ups of different lengths, whose early evaluations are random play)."""
+        keep = self.steps >= step
+        return replace(self, steps=self.steps[keep], returns=self.returns[keep],
+                       noisy_returns=self.noisy_returns[keep])
 
 
 def find_runs(paths: list[Path]) -> list[Run]:
