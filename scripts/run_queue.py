@@ -581,8 +581,10 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, PlanError) as err:
         print(f"run_queue: error: {err}", file=sys.stderr)
         return 2
+    # the hours make an HH:MM read as tomorrow (it had passed) plain to see in the log
     say(f"queue: {len(runs)} runs, commit {commit[:10]} in {worktree}, deadline "
-        f"{queue.deadline:%Y-%m-%d %H:%M}, {queue.parallel} at a time")
+        f"{queue.deadline:%Y-%m-%d %H:%M} (in {queue.minutes_left(dt.datetime.now()) / 60:.1f} h), "
+        f"{queue.parallel} at a time")
     if args.dry_run:
         for run in queue.pending():
             fits = queue.fits(run, dt.datetime.now())

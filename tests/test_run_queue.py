@@ -365,6 +365,7 @@ def test_dry_run_prints_the_plan_and_makes_no_worktree(repo: Path, monkeypatch, 
                     "--module", "fake_train", "--estimate", "results/x/*=5", "--dry-run"]) == 0
     out = capsys.readouterr().out
     assert "5 min fits  results/x/a/seed1" in out and "fake_train seed=1 train.steps=100" in out
+    assert "(in 1.0 h)" in out  # how far the deadline is: an HH:MM read as tomorrow shows
     assert not worktree.exists() and "not-made" not in git(repo, "worktree", "list")
 
 
