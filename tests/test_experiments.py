@@ -343,6 +343,20 @@ def test_plot_shows_published_per_seed_results_up_to_the_longest_run(tmp_path, c
     assert "| tdmpc, hard | 0 | 7.4 (seed 1), 20.7 (seed 2) | 14.1 |" in table
     assert "| tdmpc, hard | 2000 | 975.1 (seed 1), 675.1 (seed 2) | 825.1 |" in table
     assert "9000" not in table  # beyond the runs' 3000 steps
+    assert "final return − published" not in table  # one seed: nothing to test
+    write_run(tmp_path / "a/2", "none", 2, [0, 100, 300, 700])
+    write_run(tmp_path / "a/3", "none", 3, [0, 100, 300])  # ends at 2000, as the series
+    (tmp_path / "a/3/config.yaml").write_text("seed: 3\nagent:\n  group: D8\n")
+    write_run(tmp_path / "a/4", "none", 4, [0, 100, 500])
+    (tmp_path / "a/4/config.yaml").write_text("seed: 4\nagent:\n  group: D8\n")
+    plot.main([str(tmp_path / "a"), "--published", f"{published}:tdmpc:hard",
+               "--published", f"{published}:tdmpc2:hard"])
+    rows = [line for line in capsys.readouterr().out.splitlines() if " − tdmpc" in line]
+    # plain's seeds end at 3000 (no published point there); D8's at 2000: 300, 500 against
+    # 975.1, 675.1 (tdmpc2 has one seed at 2000: not tested)
+    assert len(rows) == 1 and rows[0].startswith("| group=D8 − tdmpc (hard) | 2, 2 | 2000 | -425.1 [")
+    welch = stats.ttest_ind([300, 500], [975.1, 675.1], equal_var=False).pvalue
+    assert rows[0].endswith(f"| {statistics.p_value(welch)} |")
     for spec, message in [(f"{published}:tdmpc", "is not PATH:ALGORITHM:TASK"),
                           (f"{published}:tdmpc:easy", "valid: tdmpc2:hard, tdmpc:hard"),
                           (f"{tmp_path}/none.csv:tdmpc:hard", "cannot read")]:

@@ -15,8 +15,10 @@ environment steps each seed took to reach each ``--threshold``; with ``--paired 
 every group against that one seed by seed (differences, bootstrap CI, paired t-test;
 repeat it to compare against several groups, each pair once); with ``--contrast A B C D``,
 whether A's margin over B is larger than C's over D (e.g. the same agents on two tasks);
-with ``--runs``, one row per run: its evaluations, wall time and the invariants of a
-working TD learner (``agents.run.td_invariants``), failures named. ``--from-step STEP``
+with ``--published``, another project's per-seed results as markers, a table, and each
+group's final returns against them (Welch); with ``--runs``, one row per run: its
+evaluations, wall time and the invariants of a working TD learner
+(``agents.run.td_invariants``), failures named. ``--from-step STEP``
 keeps only the evaluations from STEP on, everywhere (e.g. agents whose warm-ups differ,
 compared after the longest one).
 
@@ -192,6 +194,30 @@ def published_table(published: list[Published], last_step: float) -> str:
     return "\n".join(rows)
 
 
+def published_comparison_table(groups: dict[str, list[Run]], published: list[Published]) -> str:
+    """Each group's final returns against each published series at the group's last
+    evaluation step (where the series has one): the difference of the means with a 95%
+    bootstrap CI and Welch's t-test. Unpaired: the other project's seeds are not ours, and
+    its runs were made with other code on other machines; a published series has few seeds
+    (TD-MPC's: 3), so read the p-value before the CI."""
+    rows = ["| final return − published | seeds (ours, published) | env steps | mean difference "
+            "(95% CI) | Welch t-test p |", "|---|---|---|---|---|"]
+    for label, runs in groups.items():
+        last = {int(r.steps[-1]) for r in runs}
+        if len(runs) < 2 or len(last) > 1:
+            continue  # one seed, or runs that end at different steps: nothing to test
+        step = last.pop()
+        finals = np.array([r.returns[-1] for r in runs])
+        for series in published:
+            theirs = np.array([value for _, value in series.points.get(step, [])])
+            if len(theirs) < 2:
+                continue
+            rows.append(f"| {label} − {series.algorithm} ({series.task}) | {len(finals)}, "
+                        f"{len(theirs)} | {step} | {signed(mean_ci_of_difference(finals, theirs))} | "
+                        f"{welch_p(finals, theirs)} |")
+    return "\n".join(rows) if len(rows) > 2 else ""
+
+
 PUBLISHED_MARKERS = ("D", "^", "s", "v", "P")
 
 
@@ -328,6 +354,9 @@ def main(argv: list[str] | None = None) -> None:
     text = table(groups, args.threshold, evaluations)
     if published:
         text += "\n\n" + published_table(published, last_step)
+        comparison = published_comparison_table(groups, published)
+        if comparison:
+            text += "\n\n" + comparison
     if args.paired:
         text += "\n\n" + paired_table(groups, paired, evaluations)
     if args.contrast:
