@@ -362,3 +362,47 @@ def test_plot_shows_published_per_seed_results_up_to_the_longest_run(tmp_path, c
                           (f"{tmp_path}/none.csv:tdmpc:hard", "cannot read")]:
         with pytest.raises(SystemExit, match=message):
             plot.main([str(tmp_path / "a"), "--published", spec])
+
+
+def test_plot_spread_measures_how_much_each_agent_depends_on_an_option(tmp_path, capsys):
+    # returns per seed at seed_steps 1000 (and 6000, the same) and 20000
+    runs = {"none": {1: ([0, 800], [0, 200]), 2: ([0, 600], [0, 400]), 3: ([0, 1000], [0, 0])},
+            "icosahedral": {1: ([0, 900], [0, 800]), 2: ([0, 900], [0, 900]),
+                            3: ([0, 1000], [0, 700])}}
+    for group, seeds in runs.items():
+        for seed, (short, long) in seeds.items():
+            for level, returns in ((1000, short), (6000, short), (20000, long)):
+                write_run(tmp_path / f"{group}/{level}/{seed}", group, seed, returns)
+                with (tmp_path / f"{group}/{level}/{seed}/config.yaml").open("a") as f:
+                    f.write(f"train:\n  seed_steps: {level}\n")
+    write_run(tmp_path / "icosahedral/1000/4", "icosahedral", 4, [0, 0])  # no other level
+    write_run(tmp_path / "octahedral/1000/1", "octahedral", 1, [0, 0])
+    for path in ("icosahedral/1000/4", "octahedral/1000/1"):
+        with (tmp_path / path / "config.yaml").open("a") as f:
+            f.write("train:\n  seed_steps: 1000\n")
+    out = tmp_path / "curves.png"
+    plot.main([str(tmp_path), "--spread", "train.seed_steps", "--label", "group=none:plain",
+               "--out", str(out)])
+    text = capsys.readouterr().out
+    assert (tmp_path / "curves_spread.png").stat().st_size > 10_000
+    rows = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
+            for line in text.splitlines() if line.startswith("| ")}
+    # plain's ranges of the mean over evaluations: 400 − 100, 300 − 200, 500 − 0
+    assert rows["plain"][:4] == ["3", "1000: 400.0, 6000: 400.0, 20000: 100.0",
+                                 "1: 300.0, 2: 100.0, 3: 500.0", rows["plain"][3]]
+    assert rows["plain"][3].startswith("300.0 [") and rows["plain"][5].startswith("600.0 [")
+    assert rows["plain"][4] == "1000: 800.0, 6000: 800.0, 20000: 200.0"
+    assert rows["group=icosahedral"][:3] == ["3", "1000: 466.7, 6000: 466.7, 20000: 400.0",
+                                             "1: 50.0, 2: 0.0, 3: 150.0"]  # seed 4: one level
+    assert rows["group=octahedral"][0] == "0 (runs per seed_steps: 1000: 1, 6000: 0, 20000: 0)"
+    comparison = rows["group=icosahedral − plain"]
+    assert comparison[:2] == ["3", "1: -250.0, 2: -100.0, 3: -350.0"]
+    assert comparison[2].startswith("-233.3 [") and comparison[4] == "3 of 3"
+    assert comparison[3] == statistics.p_value(stats.ttest_1samp([-250, -100, -350], 0).pvalue)
+    assert not any("octahedral −" in line or "− group=octahedral" in line for line in rows)
+    with pytest.raises(SystemExit, match=r"--spread 'train.steps' is not an option whose value "
+                                         r"differs between these runs; those that do: agent.group, "
+                                         r"train.seed_steps"):
+        plot.main([str(tmp_path), "--spread", "train.steps"])
+    spread = statistics.spread_over(results.find_runs([tmp_path / "none"]), "train.seed_steps")
+    assert spread.levels == ["1000", "6000", "20000"] and spread.seeds == [1, 2, 3]

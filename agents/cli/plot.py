@@ -20,7 +20,9 @@ group's final returns against them (Welch); with ``--runs``, one row per run: it
 evaluations, wall time and the invariants of a working TD learner
 (``agents.run.td_invariants``), failures named. ``--from-step STEP``
 keeps only the evaluations from STEP on, everywhere (e.g. agents whose warm-ups differ,
-compared after the longest one).
+compared after the longest one). ``--spread OPTION`` asks how much each agent's returns move
+across the values of one option (e.g. ``train.seed_steps``: is an agent robust to its
+warm-up?): per seed, the range across the values, and the agents' ranges paired by seed.
 
 Runs are found and grouped by ``agents.run.results`` and their statistics computed by
 ``agents.run.statistics``; this module is the command line, the tables and the figure.
@@ -39,12 +41,15 @@ from scipy import stats
 from agents.run.results import Published, Run, find_runs, group_runs, read_published, seed_order
 from agents.run.run_tables import evaluation_share, wall_minutes
 from agents.run.statistics import (
+    Spread,
     curve,
     differences,
+    level_order,
     mean_ci,
     mean_ci_of_difference,
     paired_p,
     seed_pairs,
+    spread_over,
     steps_to_threshold,
     welch_p,
 )
@@ -218,6 +223,84 @@ def published_comparison_table(groups: dict[str, list[Run]], published: list[Pub
     return "\n".join(rows) if len(rows) > 2 else ""
 
 
+def spread_tables(agents: dict[str, Spread], option: str,
+                  evaluations: str = ALL_EVALUATIONS) -> str:
+    """``--spread OPTION``: per agent (the runs' options but OPTION and the seed), the mean
+    return over evaluations and the final return at each value of OPTION, and per seed
+    their range across the values (max − min: how much that seed's result depends on
+    OPTION), with a 95% bootstrap CI over seeds; then every two agents' ranges paired by
+    seed: the difference, its CI, a paired t-test and on how many seeds the first agent's
+    range is the smaller (the more robust one)."""
+    name = option.split(".")[-1]
+    rows = [f"| agent | seeds with every {name} | mean return over {evaluations} per {name} "
+            "(mean over seeds) | per-seed range across them | range (mean, 95% CI) "
+            f"| final return per {name} (mean over seeds) | final return: range (mean, 95% CI) |",
+            "|---|---|---|---|---|---|---|"]
+    for label, spread in agents.items():
+        if not spread.seeds:
+            counts = ", ".join(f"{level}: {n}" for level, n in spread.runs_per_level.items())
+            rows.append(f"| {label} | 0 (runs per {name}: {counts}) "
+                        "| – | – | – | – | – |")
+            continue
+        area_range, final_range = spread.ranges()
+        per_level = ", ".join(f"{level}: {value:.1f}"
+                              for level, value in zip(spread.levels, spread.area.mean(axis=0)))
+        finals = ", ".join(f"{level}: {value:.1f}"
+                           for level, value in zip(spread.levels, spread.final.mean(axis=0)))
+        per_seed = ", ".join(f"{seed}: {r:.1f}" for seed, r in zip(spread.seeds, area_range))
+        rows.append(f"| {label} | {len(spread.seeds)} | {per_level} | {per_seed} | "
+                    "{:.1f} [{:.1f}, {:.1f}] | ".format(*mean_ci(area_range)) + finals +
+                    " | {:.1f} [{:.1f}, {:.1f}] |".format(*mean_ci(final_range)))
+    rows += ["", "| comparison of ranges | seeds | per-seed difference of ranges, mean return over "
+             f"{evaluations} | mean difference (95% CI) | paired t-test p | smaller range on "
+             "| final return: range difference (95% CI), p |", "|---|---|---|---|---|---|---|"]
+    for (label, spread), (baseline, base) in itertools.combinations(agents.items(), 2):
+        seeds = [s for s in spread.seeds if s in base.seeds]
+        if not seeds:
+            continue
+        ranges = [dict(zip(x.seeds, zip(*x.ranges()))) for x in (spread, base)]
+        area, final = (np.array([ranges[0][s][i] - ranges[1][s][i] for s in seeds])
+                       for i in (0, 1))
+        per_seed = ", ".join(f"{seed}: {d:+.1f}" for seed, d in zip(seeds, area))
+        rows.append(f"| {label} − {baseline} | {len(seeds)} | {per_seed} | "
+                    f"{signed(mean_ci(area))} | {paired_p(area)} | {int((area < 0).sum())} of "
+                    f"{len(seeds)} | {signed(mean_ci(final))}, {paired_p(final)} |")
+    return "\n".join(rows)
+
+
+def spread_plot(agents: dict[str, Spread], option: str, out: Path, title: str,
+                evaluations: str = ALL_EVALUATIONS) -> None:
+    """``--spread`` with ``--out``: each agent's mean return over evaluations against the
+    values of OPTION (evenly spaced, in order), the mean over seeds with its 95% CI and one
+    thin line per seed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    levels = sorted({level for s in agents.values() for level in s.levels}, key=level_order)
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
+    for label, spread in agents.items():
+        if not spread.seeds:
+            continue
+        x = np.array([levels.index(level) for level in spread.levels])
+        cis = np.array([mean_ci(column) for column in spread.area.T])
+        line = ax.errorbar(x, cis[:, 0], yerr=np.stack([cis[:, 0] - cis[:, 1], cis[:, 2] - cis[:, 0]]),
+                           marker="o", capsize=4, label=f"{label} ({len(spread.seeds)} seeds)")
+        for per_seed in spread.area:
+            ax.plot(x, per_seed, color=line[0].get_color(), alpha=0.3, linewidth=1)
+    ax.set_xticks(range(len(levels)), [str(level) for level in levels])
+    ax.set_xlabel(option)
+    ax.set_ylabel(f"mean return over {evaluations}")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out)
+    plt.close(fig)
+
+
 PUBLISHED_MARKERS = ("D", "^", "s", "v", "P")
 
 
@@ -258,9 +341,10 @@ def plot(groups: dict[str, list[Run]], out: Path, title: str,
     plt.close(fig)
 
 
-def rename_groups(groups: dict[str, list[Run]], labels: list[str]) -> dict[str, str]:
+def rename_groups(labels: list[str], *tables: dict[str, object]) -> dict[str, str]:
     """Apply ``--label GROUP:NAME`` (a table's label to the name a reader should see, e.g.
-    ``group=none:plain``) to ``groups`` in place; returns the renaming, so that options
+    ``group=none:plain``) to each of ``tables`` (the groups; with ``--spread``, its agents)
+    in place, wherever the label is one of its keys; returns the renaming, so that options
     naming a group (``--paired``) accept either name."""
     renamed: dict[str, str] = {}
     for spec in labels:
@@ -268,13 +352,28 @@ def rename_groups(groups: dict[str, list[Run]], labels: list[str]) -> dict[str, 
         if not sep or not new:
             raise SystemExit(f"geomdp-plot: error: --label {spec!r} is not GROUP:NAME "
                              "(e.g. 'group=none:plain')")
-        require_groups("--label", [old], groups)
-        if new in groups or new in renamed.values():
+        if not any(old in table for table in tables):
+            require_groups("--label", [old], dict.fromkeys(k for t in tables for k in t))
+        if any(new in table for table in tables) or new in renamed.values():
             raise SystemExit(f"geomdp-plot: error: --label {spec!r}: {new!r} already names a group")
         renamed[old] = new
-    for old in list(groups):  # rebuilt in order, so that the table keeps the groups' order
-        groups[renamed.get(old, old)] = groups.pop(old)
+    for table in tables:
+        for old in list(table):  # rebuilt in order, so that the table keeps the groups' order
+            table[renamed.get(old, old)] = table.pop(old)
     return renamed
+
+
+def spread_agents(runs: list[Run], option: str, ignored: tuple[str, ...]) -> dict[str, Spread]:
+    """``--spread OPTION``: the runs grouped by their other options (one group per agent),
+    each as a ``Spread`` over OPTION's values; a one-line error if OPTION does not vary."""
+    varying = sorted({k for r in runs for k in r.options
+                      if len({str(x.options.get(k)) for x in runs}) > 1} - {"seed"})
+    if option not in varying:
+        raise SystemExit(f"geomdp-plot: error: --spread {option!r} is not an option whose value "
+                         f"differs between these runs; those that do: {', '.join(varying) or 'none'}")
+    levels = sorted({str(r.options.get(option)) for r in runs}, key=level_order)
+    return {label: spread_over(agent_runs, option, levels)
+            for label, agent_runs in group_runs(runs, (*ignored, option)).items()}
 
 
 def default_title(paths: list[Path]) -> str:
@@ -319,6 +418,11 @@ def main(argv: list[str] | None = None) -> None:
                         help="use only the evaluations at this env step or later in the tables "
                              "and the figure (e.g. 25000: compare agents after warm-ups of "
                              "different lengths); steps to a threshold count from it too")
+    parser.add_argument("--spread", metavar="OPTION", default=None,
+                        help="how much each agent's returns move across the values of this "
+                             "option (e.g. train.seed_steps), per seed, and the agents' "
+                             "ranges compared seed by seed; with --out, also OPTION's figure "
+                             "(<out>_spread.png)")
     parser.add_argument("--runs", action="store_true",
                         help="also list every run: evaluations, wall time, TD learner invariants")
     args = parser.parse_args(argv)
@@ -337,7 +441,8 @@ def main(argv: list[str] | None = None) -> None:
         runs = [r.from_step(args.from_step) for r in runs]
         evaluations = f"evaluations from env step {args.from_step} on"
     groups = group_runs(runs, tuple(args.ignore))
-    renamed = rename_groups(groups, args.label)
+    agents = spread_agents(runs, args.spread, tuple(args.ignore)) if args.spread else {}
+    renamed = rename_groups(args.label, groups, agents)
     paired = [renamed.get(b, b) for b in args.paired]
     references = []
     for ref in args.reference:
@@ -351,6 +456,9 @@ def main(argv: list[str] | None = None) -> None:
     if args.out:
         plot(groups, args.out, args.title or default_title(args.paths), references, published,
              last_step)
+        if agents:
+            spread_plot(agents, args.spread, args.out.with_name(f"{args.out.stem}_spread.png"),
+                        args.title or default_title(args.paths), evaluations)
     text = table(groups, args.threshold, evaluations)
     if published:
         text += "\n\n" + published_table(published, last_step)
@@ -362,6 +470,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.contrast:
         text += "\n\n" + contrast_table(groups, [[renamed.get(n, n) for n in names]
                                                   for names in args.contrast], evaluations)
+    if agents:
+        text += "\n\n" + spread_tables(agents, args.spread, evaluations)
     if args.runs:
         text += "\n\n" + runs_table(groups)
     print(text)

@@ -1,6 +1,7 @@
 """Statistics of runs' evaluation returns, as ``geomdp-plot`` reports them: means with
 95% bootstrap confidence intervals (per evaluation step: ``curve``), steps to reach a
-return, per-seed differences between groups paired by seed, paired and Welch t-tests.
+return, per-seed differences between groups paired by seed, paired and Welch t-tests, and the
+spread of an agent's returns across the values of one option (``spread_over``).
 
 Torch-free, as ``run_tables``.
 """
@@ -8,6 +9,7 @@ Torch-free, as ``run_tables``.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
@@ -84,3 +86,52 @@ def welch_p(a: np.ndarray, b: np.ndarray) -> str:
     if np.var(a) == 0 and np.var(b) == 0:
         return "–"
     return p_value(stats.ttest_ind(a, b, equal_var=False).pvalue)
+
+
+def level_order(level: object) -> tuple[int, float, str]:
+    """Sort key for an option's values: numbers in numeric order (2000 before 20000),
+    then anything else as text."""
+    try:
+        return 0, float(str(level)), ""
+    except ValueError:
+        return 1, 0.0, str(level)
+
+
+@dataclass
+class Spread:
+    """How much one agent's returns move across the values (levels) of one option, seed by
+    seed: e.g. the warm-up length ``train.seed_steps``. ``area`` and ``final`` are (seeds ×
+    levels): the mean return over evaluations and the final return of each run. Only seeds
+    with a run at every level count, so that every range spans the same levels."""
+
+    levels: list[str]
+    seeds: list[object]
+    area: np.ndarray
+    final: np.ndarray
+    runs_per_level: dict[str, int]  # every run's, whether its seed has all levels or not
+
+    def ranges(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per seed: max − min across levels of the mean return over evaluations, and of
+        the final return."""
+        return (np.ptp(self.area, axis=1) if self.seeds else np.array([]),
+                np.ptp(self.final, axis=1) if self.seeds else np.array([]))
+
+
+def spread_over(runs: list[Run], option: str, levels: list[str] | None = None) -> Spread:
+    """``runs`` (one agent, several seeds and values of ``option``) as a ``Spread`` over
+    ``levels`` (default: the values these runs have; pass every agent's, so that all ranges
+    span the same values)."""
+    by_seed: dict[object, dict[str, Run]] = {}
+    for run in runs:
+        by_seed.setdefault(run.options.get("seed"), {})[str(run.options.get(option))] = run
+    if levels is None:
+        levels = sorted({level for runs_of_seed in by_seed.values() for level in runs_of_seed},
+                        key=level_order)
+    seeds = sorted((s for s, runs_of_seed in by_seed.items() if set(levels) <= set(runs_of_seed)),
+                   key=seed_order)
+    area = np.array([[by_seed[s][level].returns.mean() for level in levels] for s in seeds])
+    final = np.array([[by_seed[s][level].returns[-1] for level in levels] for s in seeds])
+    runs_per_level = {level: sum(level in runs_of_seed for runs_of_seed in by_seed.values())
+                      for level in levels}
+    return Spread(levels, seeds, area.reshape(len(seeds), len(levels)),
+                  final.reshape(len(seeds), len(levels)), runs_per_level)
