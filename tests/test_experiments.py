@@ -406,3 +406,30 @@ def test_plot_spread_measures_how_much_each_agent_depends_on_an_option(tmp_path,
         plot.main([str(tmp_path), "--spread", "train.steps"])
     spread = statistics.spread_over(results.find_runs([tmp_path / "none"]), "train.seed_steps")
     assert spread.levels == ["1000", "6000", "20000"] and spread.seeds == [1, 2, 3]
+
+
+def test_plot_panels_draw_one_axes_per_value_with_the_same_groups(tmp_path, capsys):
+    for n_balls, groups in ((2, ("none", "icosahedral")), (3, ("none",))):
+        for group in groups:
+            for seed in (1, 2):
+                path = tmp_path / f"n{n_balls}/{group}/{seed}"
+                write_run(path, group, seed, [0, 100 * n_balls + seed])
+                with (path / "config.yaml").open("a") as f:
+                    f.write(f"env:\n  n_balls: {n_balls}\n")
+    runs = results.find_runs([tmp_path])
+    panels = plot.panel_groups(runs, "env.n_balls", ())
+    assert {panel: {label: sorted(r.options["seed"] for r in rs) for label, rs in groups.items()}
+            for panel, groups in panels.items()} == {
+        "n_balls=2": {"group=icosahedral": [1, 2], "group=none": [1, 2]},
+        "n_balls=3": {"group=none": [1, 2]}}
+    out = tmp_path / "panels.png"
+    plot.main([str(tmp_path), "--panels", "env.n_balls", "--label", "group=none:plain",
+               "--out", str(out)])
+    width = int.from_bytes(out.read_bytes()[16:20], "big")  # the PNG header's width
+    assert width == int(2 * 4.4 * 120)  # two panels side by side
+    table = capsys.readouterr().out  # the table keeps one row per group
+    assert "| group=none, n_balls=2 | 2 |" in table and "| group=none, n_balls=3 | 2 |" in table
+    with pytest.raises(SystemExit, match="--panels 'env.target_size' is not an option whose value "
+                                         "differs between these runs; those that do: agent.group, "
+                                         "env.n_balls"):
+        plot.main([str(tmp_path), "--panels", "env.target_size", "--out", str(out)])

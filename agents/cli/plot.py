@@ -23,6 +23,7 @@ keeps only the evaluations from STEP on, everywhere (e.g. agents whose warm-ups 
 compared after the longest one). ``--spread OPTION`` asks how much each agent's returns move
 across the values of one option (e.g. ``train.seed_steps``: is an agent robust to its
 warm-up?): per seed, the range across the values, and the agents' ranges paired by seed.
+``--panels OPTION`` draws one panel per value of an option (e.g. ``env.n_balls``).
 
 Runs are found and grouped by ``agents.run.results`` and their statistics computed by
 ``agents.run.statistics``; this module is the command line, the tables and the figure.
@@ -273,13 +274,8 @@ def spread_plot(agents: dict[str, Spread], option: str, out: Path, title: str,
     """``--spread`` with ``--out``: each agent's mean return over evaluations against the
     values of OPTION (evenly spaced, in order), the mean over seeds with its 95% CI and one
     thin line per seed."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     levels = sorted({level for s in agents.values() for level in s.levels}, key=level_order)
-    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
+    fig, (ax,) = new_figure()
     for label, spread in agents.items():
         if not spread.seeds:
             continue
@@ -295,50 +291,68 @@ def spread_plot(agents: dict[str, Spread], option: str, out: Path, title: str,
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out)
-    plt.close(fig)
+    save_figure(fig, out)
 
 
 PUBLISHED_MARKERS = ("D", "^", "s", "v", "P")
 
 
-def plot(groups: dict[str, list[Run]], out: Path, title: str,
-         references: list[tuple[float, str]], published: list[Published] = (),
-         last_step: float | None = None) -> None:
-    """The curves with their 95% CIs; ``published`` results are drawn up to ``last_step``
-    (default: the longest run in ``groups``)."""
+def new_figure(panels: int = 1) -> tuple[object, list[object]]:
+    """A figure of ``panels`` axes side by side (sharing the y axis), drawn off-screen."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
-    for label, runs in groups.items():
-        steps, mean, low, high, n = curve(runs)
-        line, = ax.plot(steps, mean, label=f"{label} ({len(runs)} seeds)")
-        ax.fill_between(steps, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
-    for value, name in references:
-        ax.axhline(value, color="black", linestyle="--", linewidth=1, label=name)
-    if last_step is None:
-        last_step = max(run.steps[-1] for runs in groups.values() for run in runs)
-    for series, marker in zip(published, itertools.cycle(PUBLISHED_MARKERS)):
-        points = [(step, value) for step, values in series.until(last_step).items()
-                  for _, value in values]
-        if points:
-            seeds = len(next(iter(series.points.values())))
-            ax.scatter(*zip(*points), marker=marker, color="black", facecolors="none", zorder=3,
-                       label=f"{series.algorithm}, published ({seeds} seeds, one marker each)")
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("evaluation return")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    fig, axes = plt.subplots(1, panels, figsize=(6.4 if panels == 1 else 4.4 * panels, 4.2),
+                             dpi=120, sharey=True, squeeze=False)
+    return fig, list(axes[0])
+
+
+def save_figure(fig: object, out: Path) -> None:
+    import matplotlib.pyplot as plt
+
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out)
     plt.close(fig)
+
+
+def plot(panels: dict[str, dict[str, list[Run]]], out: Path, title: str,
+         references: list[tuple[float, str]], published: list[Published] = (),
+         last_step: float | None = None) -> None:
+    """The curves with their 95% CIs, one axes per panel (``{"": groups}`` for one; with
+    ``--panels OPTION``, one per value of OPTION, each group in the same colour in every
+    panel); ``published`` results are drawn up to ``last_step`` (default: the longest run)."""
+    fig, axes = new_figure(len(panels))
+    if last_step is None:
+        last_step = max(run.steps[-1] for groups in panels.values() for runs in groups.values()
+                        for run in runs)
+    colours: dict[str, str] = {}
+    for ax, (panel, groups) in zip(axes, panels.items()):
+        for label, runs in groups.items():
+            colour = colours.setdefault(label, f"C{len(colours) % 10}")
+            steps, mean, low, high, n = curve(runs)
+            ax.plot(steps, mean, color=colour, label=f"{label} ({len(runs)} seeds)")
+            ax.fill_between(steps, low, high, color=colour, alpha=0.2, linewidth=0)
+        for value, name in references:
+            ax.axhline(value, color="black", linestyle="--", linewidth=1, label=name)
+        for series, marker in zip(published, itertools.cycle(PUBLISHED_MARKERS)):
+            points = [(step, value) for step, values in series.until(last_step).items()
+                      for _, value in values]
+            if points:
+                seeds = len(next(iter(series.points.values())))
+                ax.scatter(*zip(*points), marker=marker, color="black", facecolors="none",
+                           zorder=3, label=f"{series.algorithm}, published ({seeds} seeds, "
+                                           "one marker each)")
+        ax.set_xlabel("environment steps")
+        ax.set_title(panel or title)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8 if len(panels) == 1 else 7)
+    axes[0].set_ylabel("evaluation return")
+    if len(panels) > 1:
+        fig.suptitle(title)
+    save_figure(fig, out)
 
 
 def rename_groups(labels: list[str], *tables: dict[str, object]) -> dict[str, str]:
@@ -363,17 +377,37 @@ def rename_groups(labels: list[str], *tables: dict[str, object]) -> dict[str, st
     return renamed
 
 
-def spread_agents(runs: list[Run], option: str, ignored: tuple[str, ...]) -> dict[str, Spread]:
-    """``--spread OPTION``: the runs grouped by their other options (one group per agent),
-    each as a ``Spread`` over OPTION's values; a one-line error if OPTION does not vary."""
+def values_of(flag: str, option: str, runs: list[Run]) -> list[str]:
+    """The values ``option`` takes in ``runs``, in order; a one-line error naming the options
+    that do vary if it does not."""
     varying = sorted({k for r in runs for k in r.options
                       if len({str(x.options.get(k)) for x in runs}) > 1} - {"seed"})
     if option not in varying:
-        raise SystemExit(f"geomdp-plot: error: --spread {option!r} is not an option whose value "
+        raise SystemExit(f"geomdp-plot: error: {flag} {option!r} is not an option whose value "
                          f"differs between these runs; those that do: {', '.join(varying) or 'none'}")
-    levels = sorted({str(r.options.get(option)) for r in runs}, key=level_order)
+    return sorted({str(r.options.get(option)) for r in runs}, key=level_order)
+
+
+def spread_agents(runs: list[Run], option: str, ignored: tuple[str, ...]) -> dict[str, Spread]:
+    """``--spread OPTION``: the runs grouped by their other options (one group per agent),
+    each as a ``Spread`` over OPTION's values."""
+    levels = values_of("--spread", option, runs)
     return {label: spread_over(agent_runs, option, levels)
             for label, agent_runs in group_runs(runs, (*ignored, option)).items()}
+
+
+def panel_groups(runs: list[Run], option: str,
+                 ignored: tuple[str, ...]) -> dict[str, dict[str, list[Run]]]:
+    """``--panels OPTION``: one panel per value of OPTION (``n_balls=2``), holding the runs
+    grouped by their other options, labelled alike in every panel."""
+    name = option.split(".")[-1]
+    agents = group_runs(runs, (*ignored, option))
+    panels = {}
+    for value in values_of("--panels", option, runs):
+        in_panel = {label: [r for r in agent_runs if str(r.options.get(option)) == value]
+                    for label, agent_runs in agents.items()}
+        panels[f"{name}={value}"] = {label: rs for label, rs in in_panel.items() if rs}
+    return panels
 
 
 def default_title(paths: list[Path]) -> str:
@@ -423,6 +457,9 @@ def main(argv: list[str] | None = None) -> None:
                              "option (e.g. train.seed_steps), per seed, and the agents' "
                              "ranges compared seed by seed; with --out, also OPTION's figure "
                              "(<out>_spread.png)")
+    parser.add_argument("--panels", metavar="OPTION", default=None,
+                        help="draw one panel per value of this option (e.g. env.n_balls), the "
+                             "groups by their other options; the tables are unchanged")
     parser.add_argument("--runs", action="store_true",
                         help="also list every run: evaluations, wall time, TD learner invariants")
     args = parser.parse_args(argv)
@@ -442,7 +479,9 @@ def main(argv: list[str] | None = None) -> None:
         evaluations = f"evaluations from env step {args.from_step} on"
     groups = group_runs(runs, tuple(args.ignore))
     agents = spread_agents(runs, args.spread, tuple(args.ignore)) if args.spread else {}
-    renamed = rename_groups(args.label, groups, agents)
+    panels = (panel_groups(runs, args.panels, tuple(args.ignore)) if args.panels
+              else {"": groups})
+    renamed = rename_groups(args.label, groups, agents, *(panels.values() if args.panels else ()))
     paired = [renamed.get(b, b) for b in args.paired]
     references = []
     for ref in args.reference:
@@ -454,7 +493,7 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(f"geomdp-plot: error: {err}") from None
     last_step = max(run.steps[-1] for run in runs)  # published results are shown up to it
     if args.out:
-        plot(groups, args.out, args.title or default_title(args.paths), references, published,
+        plot(panels, args.out, args.title or default_title(args.paths), references, published,
              last_step)
         if agents:
             spread_plot(agents, args.spread, args.out.with_name(f"{args.out.stem}_spread.png"),
