@@ -109,6 +109,28 @@ def test_killed_run_resumes_to_the_same_result(tmp_path, uninterrupted, agent, k
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("agent", ["plain", "D8", "octahedral-pointmass3d"])
+def test_a_run_killed_inside_the_burst_resumes_from_its_middle(tmp_path, uninterrupted, agent):
+    """The burst after the warm-up (here 125 updates; TD-MPC's is 5000) is checkpointed
+    every ``checkpoint_every`` env steps' worth of updates (250 // 8 = 31): killed at
+    update 100, the run resumes at update 93, not at the burst's start, and its logs
+    equal an uninterrupted run's, made with checkpoints at episode ends only."""
+    args = [*TINY, *AGENTS[agent], "train.checkpoint_every=250", f"hydra.run.dir={tmp_path}"]
+    killed = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300,
+                            env={**os.environ, "GEOMDP_KILL_AT": "update:100"})
+    assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
+    assert json.loads((tmp_path / "checkpoint/state.json").read_text())["unfinished_episode"][
+        "updates_done"] == 93
+    finished = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300)
+    assert finished.returncode == 0, finished.stderr[-2000:]
+    assert "at env step 1000, 93 of its 125 updates done" in finished.stdout, finished.stdout
+    for table in ("eval.csv", "train.csv"):
+        assert rows(tmp_path / table) == rows(uninterrupted(agent) / table), table
+    state = json.loads((tmp_path / "checkpoint/state.json").read_text())
+    assert state["unfinished_episode"] is None and state["env_step"] == 2000
+
+
+@pytest.mark.slow
 def test_sigterm_stops_at_a_safe_point_with_one_line(tmp_path):
     """SIGTERM during an equivariant run's second episode (planning or its updates): the
     loop stops at a safe point, with one line naming the checkpoint it keeps and no

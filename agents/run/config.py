@@ -73,7 +73,8 @@ class TrainOptions:
     eval_noisy_episodes: int = option(3, low=0)  # the same start states with training noise
     threads: int = option(1, low=1)              # torch threads
     progress: bool = True
-    checkpoint_every: int = option(1000, low=1)  # env steps between checkpoints (at episode ends)
+    # env steps between checkpoints (at episode ends; in a block of updates: that many steps' worth)
+    checkpoint_every: int = option(1000, low=1)
     video: bool = False
     video_every: int = option(5, low=1)
 

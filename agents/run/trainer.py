@@ -101,7 +101,7 @@ class Trainer:
         self.checkpoint_options = options.checkpoint_options()
         self.state = {"env_step": 0, "agent_step": 0, "episode": 0, "pending_updates": 0,
                       "wall_time": 0.0, "last_eval_step": None, "last_eval_reward": None,
-                      "last_checkpoint_step": 0}
+                      "last_checkpoint_step": 0, "unfinished_episode": None}
         self.progress: Progress | None = None  # while train() runs
 
     def restore(self) -> int:
@@ -109,9 +109,14 @@ class Trainer:
         start its logs over; record this session. Returns the env step it starts from."""
         restored = checkpoint.load(self.run_dir, self.agent, self.buffer, self.checkpoint_options)
         if restored is not None:
-            self.state.update({k: restored[k] for k in self.state})
-            dropped = self.log.truncate_after(self.state["env_step"])
-            print(f"resuming {self.run_dir} at env step {self.state['env_step']} "
+            # (checkpoints from before unfinished_episode existed lack it: never inside updates)
+            self.state.update({k: restored.get(k, self.state[k]) for k in self.state})
+            episode = self.state["unfinished_episode"]
+            # Inside an episode's updates, no row of its env step is written yet.
+            dropped = self.log.truncate_after(self.state["env_step"] - (episode is not None))
+            inside = ("" if episode is None else f", {episode['updates_done']} of its "
+                      f"{self.state['pending_updates']} updates done")
+            print(f"resuming {self.run_dir} at env step {self.state['env_step']}{inside} "
                   f"(dropped {dropped} log rows written after the checkpoint)")
         else:
             # No checkpoint: the run starts over, and so do its logs (killed before the
@@ -201,10 +206,10 @@ class Trainer:
     def _counters(self) -> dict[str, float]:
         return {k: self.state[k] for k in ("env_step", "agent_step", "episode", "wall_time")}
 
-    def update(self, n: int) -> dict[str, float]:
-        """``n`` gradient updates on replayed slices; their metrics averaged."""
+    def update(self, n: int, of: int, totals: dict[str, float]) -> None:
+        """``n`` gradient updates on replayed slices, their metrics added to ``totals`` as a
+        share of ``of`` (the episode's updates: its average, built up across checkpoints)."""
         horizon = self.agent.config.horizon
-        totals: dict[str, float] = {}
         for _ in range(n):
             self.stop.check()
             faults.point("update")
@@ -213,8 +218,7 @@ class Trainer:
                                                                "priority_weight", strict=False))
             update_priorities(self.buffer, batch, priority)
             for k, v in metrics.items():
-                totals[k] = totals.get(k, 0.0) + v / n
-        return totals
+                totals[k] = totals.get(k, 0.0) + v / of
 
     def train(self) -> None:
         cfg, state = self.options.train, self.state
@@ -226,39 +230,78 @@ class Trainer:
             self.progress = None
 
     def _train(self) -> None:
-        cfg, state, seed = self.options.train, self.state, self.options.seed
+        cfg, state = self.options.train, self.state
         if state["last_eval_step"] is None:
             self.evaluate()
-        while state["env_step"] < cfg.steps:
+        # ``unfinished_episode`` is set from the moment an episode is collected until its
+        # train row is logged: a checkpoint taken in between (inside a long block of
+        # updates) resumes the block where it stopped.
+        while state["env_step"] < cfg.steps or state["unfinished_episode"] is not None:
+            if state["unfinished_episode"] is None:
+                self.collect_episode()
+            else:
+                self.progress.episode_started()
+            metrics = self.episode_updates()
+            self.end_episode(metrics)
+
+    def collect_episode(self) -> None:
+        """One training episode into the replay buffer; its updates fall due."""
+        cfg, state = self.options.train, self.state
+        start = time.perf_counter()
+        self.progress.episode_started()
+        random = state["env_step"] < cfg.seed_steps
+        td = self.episode(self.env, 1000 * self.options.seed + state["episode"], explore=True,
+                          random=random)
+        length = td.shape[0]
+        td.set("episode", torch.full((length,), state["episode"], dtype=torch.int64))
+        self.buffer.extend(td.select(*REPLAY_KEYS))
+        state["episode"] += 1
+        state["agent_step"] += length
+        state["env_step"] += length * self.action_repeat
+        state["pending_updates"] += length * cfg.updates_per_step
+        state["unfinished_episode"] = {"length": length,
+                                       "reward": float(td["next", "reward"].sum()),
+                                       "seconds": time.perf_counter() - start,
+                                       "updates_done": 0, "metrics": {}}
+
+    def episode_updates(self) -> dict[str, float]:
+        """The updates due after an episode (none during the warm-up; after it, all those
+        the warm-up held back, then one per agent step), averaged. A long block (the burst
+        after the warm-up: TD-MPC's is 5000 updates) is checkpointed every
+        ``checkpoint_every`` env steps' worth of updates, so that a stop inside it keeps
+        what is done."""
+        cfg, state, episode = self.options.train, self.state, self.state["unfinished_episode"]
+        if state["env_step"] < cfg.seed_steps:
+            return {}
+        due = state["pending_updates"]
+        chunk = max(1, cfg.checkpoint_every // self.action_repeat * cfg.updates_per_step)
+        self.progress.updating(due - episode["updates_done"])
+        while episode["updates_done"] < due:
             start = time.perf_counter()
-            self.progress.episode_started()
-            random = state["env_step"] < cfg.seed_steps
-            td = self.episode(self.env, 1000 * seed + state["episode"], explore=True, random=random)
-            length = td.shape[0]
-            td.set("episode", torch.full((length,), state["episode"], dtype=torch.int64))
-            self.buffer.extend(td.select(*REPLAY_KEYS))
-            state["episode"] += 1
-            state["agent_step"] += length
-            state["env_step"] += length * self.action_repeat
-            state["pending_updates"] += length * cfg.updates_per_step
-            metrics = {}
-            if state["env_step"] >= cfg.seed_steps:
-                self.progress.updating(state["pending_updates"])
-                metrics = self.update(state["pending_updates"])
-                metrics["updates"] = state["pending_updates"]
-                metrics["target_lag"] = self.agent.target_lag()
-                state["pending_updates"] = 0
-            self.progress.episode_done(length * self.action_repeat)
-            elapsed = time.perf_counter() - start
-            state["wall_time"] += elapsed
-            self.log.log("train", {**self._counters(), **metrics,
-                                   "episode_reward": float(td["next", "reward"].sum()),
-                                   "steps_per_second": length * self.action_repeat / elapsed})
-            if cfg.evaluation_due(state["env_step"], state["last_eval_step"]):
-                eval_start = time.perf_counter()
-                self.evaluate()
-                state["wall_time"] += time.perf_counter() - eval_start
-            if (state["env_step"] - state["last_checkpoint_step"] >= cfg.checkpoint_every
-                    or state["env_step"] >= cfg.steps):
-                state["last_checkpoint_step"] = state["env_step"]
-                checkpoint.save(self.run_dir, self.agent, self.buffer, state, self.checkpoint_options)
+            n = min(chunk, due - episode["updates_done"])
+            self.update(n, due, episode["metrics"])
+            episode["updates_done"] += n
+            episode["seconds"] += time.perf_counter() - start
+            if episode["updates_done"] < due:
+                checkpoint.save(self.run_dir, self.agent, self.buffer, state,
+                                self.checkpoint_options)
+        state["pending_updates"] = 0
+        return {**episode["metrics"], "updates": due, "target_lag": self.agent.target_lag()}
+
+    def end_episode(self, metrics: dict[str, float]) -> None:
+        """The episode's train row; then an evaluation and a checkpoint when due."""
+        cfg, state, episode = self.options.train, self.state, self.state["unfinished_episode"]
+        self.progress.episode_done(episode["length"] * self.action_repeat)
+        state["wall_time"] += episode["seconds"]
+        state["unfinished_episode"] = None
+        self.log.log("train", {**self._counters(), **metrics, "episode_reward": episode["reward"],
+                               "steps_per_second": episode["length"] * self.action_repeat
+                               / episode["seconds"]})
+        if cfg.evaluation_due(state["env_step"], state["last_eval_step"]):
+            eval_start = time.perf_counter()
+            self.evaluate()
+            state["wall_time"] += time.perf_counter() - eval_start
+        if (state["env_step"] - state["last_checkpoint_step"] >= cfg.checkpoint_every
+                or state["env_step"] >= cfg.steps):
+            state["last_checkpoint_step"] = state["env_step"]
+            checkpoint.save(self.run_dir, self.agent, self.buffer, state, self.checkpoint_options)
