@@ -108,26 +108,58 @@ def test_killed_run_resumes_to_the_same_result(tmp_path, uninterrupted, agent, k
     assert not (tmp_path / "checkpoint.old").exists() and not (tmp_path / "checkpoint.tmp").exists()
 
 
+# Two random episodes, so that the burst after them (250 updates) is longer than an
+# episode's own 125: it is checkpointed every ceil(250 / 8) = 32 updates.
+BURST = ["train.seed_steps=2000", "train.steps=3000", "train.checkpoint_every=250"]
+
+
+@pytest.fixture(scope="module")
+def uninterrupted_burst(tmp_path_factory):
+    """One uninterrupted run per agent with BURST's warm-up, checkpointed at episode ends only
+    (the default checkpoint_every, 1000, is an episode of TINY's)."""
+    made = {}
+
+    def get(agent):
+        if agent not in made:
+            made[agent] = tmp_path_factory.mktemp(f"burst-{agent}")
+            assert run(config(*AGENTS[agent], *BURST[:2]), made[agent]) == 0
+        return made[agent]
+
+    return get
+
+
+def checkpoint_format(run_dir):
+    return json.loads((run_dir / "checkpoint/manifest.json").read_text())["format"]
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("agent", ["plain", "D8", "octahedral-pointmass3d"])
-def test_a_run_killed_inside_the_burst_resumes_from_its_middle(tmp_path, uninterrupted, agent):
-    """The burst after the warm-up (here 125 updates; TD-MPC's is 5000) is checkpointed
-    every ``checkpoint_every`` env steps' worth of updates (250 // 8 = 31): killed at
-    update 100, the run resumes at update 93, not at the burst's start, and its logs
-    equal an uninterrupted run's, made with checkpoints at episode ends only."""
-    args = [*TINY, *AGENTS[agent], "train.checkpoint_every=250", f"hydra.run.dir={tmp_path}"]
+@pytest.mark.parametrize("agent, steps, kill_at, resumed_at", [
+    ("plain", 3000, "update:100", "96 of its 250"),
+    ("D8", 3000, "update:100", "96 of its 250"),
+    ("plain", 3000, "checkpoint_write:3", "32 of its 250"),  # killed writing the 2nd in the burst
+    ("plain", 2000, "update:100", "96 of its 250")])  # the burst is the run's last episode
+def test_a_run_killed_inside_the_burst_resumes_from_its_middle(tmp_path, uninterrupted_burst,
+                                                                agent, steps, kill_at, resumed_at):
+    """The burst of updates after the warm-up (TD-MPC's: 5000) is checkpointed every
+    ``checkpoint_every`` env steps' worth of updates: killed inside it, a run resumes there,
+    not at the burst's start, and its logs equal an uninterrupted run's (checkpointed at
+    episode ends only) in every column but the wall-clock ones. Code from before these
+    checkpoints would redo the whole burst: they have a format of their own, 4."""
+    args = [*TINY, *AGENTS[agent], *BURST, f"train.steps={steps}", f"hydra.run.dir={tmp_path}"]
     killed = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300,
-                            env={**os.environ, "GEOMDP_KILL_AT": "update:100"})
+                            env={**os.environ, "GEOMDP_KILL_AT": kill_at})
     assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
-    assert json.loads((tmp_path / "checkpoint/state.json").read_text())["unfinished_episode"][
-        "updates_done"] == 93
+    assert checkpoint_format(tmp_path) == 4
     finished = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300)
     assert finished.returncode == 0, finished.stderr[-2000:]
-    assert "at env step 1000, 93 of its 125 updates done" in finished.stdout, finished.stdout
+    assert f"at env step 2000, {resumed_at} updates done" in finished.stdout, finished.stdout
+    reference = uninterrupted_burst(agent)
     for table in ("eval.csv", "train.csv"):
-        assert rows(tmp_path / table) == rows(uninterrupted(agent) / table), table
+        expected = [r for r in rows(reference / table) if int(r["env_step"]) <= steps]
+        assert rows(tmp_path / table) == expected, table
     state = json.loads((tmp_path / "checkpoint/state.json").read_text())
-    assert state["unfinished_episode"] is None and state["env_step"] == 2000
+    assert state["unfinished_episode"] is None and state["env_step"] == steps
+    assert checkpoint_format(tmp_path) == 3
 
 
 @pytest.mark.slow

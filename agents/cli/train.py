@@ -137,9 +137,10 @@ def run(cfg: DictConfig, run_dir: Path, hydra_records: tuple[DictConfig, DictCon
     except KeyboardInterrupt:
         for s in previous:  # stopping: a further signal must not interrupt the report
             signal.signal(s, signal.SIG_IGN)
-        step = checkpoint.saved_step(run_dir)
-        where = (f"the last checkpoint is at env step {step}: run the same command to continue"
-                 if step else "no checkpoint yet: the same command starts the run over")
+        saved = checkpoint.saved_state(run_dir)
+        where = (f"the last checkpoint is at {checkpoint.describe(saved)}: run the same command "
+                 "to continue" if saved and saved["env_step"] else
+                 "no checkpoint yet: the same command starts the run over")
         print(f"\ninterrupted; {where}", file=sys.stderr)
         return 130
     finally:

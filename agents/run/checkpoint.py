@@ -35,6 +35,11 @@ from agents.tdmpc.agent import TDMPCAgent
 from agents.tdmpc.replay import load_replay, save_replay
 
 FORMAT_VERSION = 3
+# A checkpoint inside a block of updates (its loop state has an ``unfinished_episode``):
+# a format of its own, so that code from before it refuses it instead of redoing the
+# whole block on top of the updates already made.
+INSIDE_UPDATES_FORMAT = 4
+FORMATS = (FORMAT_VERSION, INSIDE_UPDATES_FORMAT)
 MANIFEST = "manifest.json"
 
 
@@ -78,8 +83,9 @@ def save(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
                     "cuda_rng": cuda_rng, "numpy_rng": np.random.get_state()}, tmp / "agent.pt")
         faults.point("checkpoint_write")
         save_replay(buffer, tmp / "replay.pt")
-        (tmp / "state.json").write_text(json.dumps({"format": FORMAT_VERSION, **loop_state}, indent=1))
-        manifest = {"format": FORMAT_VERSION, "options": options or {},
+        version = INSIDE_UPDATES_FORMAT if loop_state.get("unfinished_episode") else FORMAT_VERSION
+        (tmp / "state.json").write_text(json.dumps({"format": version, **loop_state}, indent=1))
+        manifest = {"format": version, "options": options or {},
                     "files": {name: _sha256(tmp / name) for name in _files(tmp)}}
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=1))
         if final.exists():
@@ -111,14 +117,29 @@ def recover(run_dir: Path) -> Path | None:
     return None
 
 
-def saved_step(run_dir: Path) -> int:
-    """The env step of the checkpoint a rerun will resume from (0: none); a save
+def saved_state(run_dir: Path) -> dict[str, Any] | None:
+    """The loop state of the checkpoint a rerun will resume from (None: none); a save
     interrupted mid-swap leaves it under ``checkpoint.old``."""
     for path in (checkpoint_dir(run_dir), run_dir / "checkpoint.old"):
         state = path / "state.json"
         if state.exists():
-            return json.loads(state.read_text())["env_step"]
-    return 0
+            return json.loads(state.read_text())
+    return None
+
+
+def saved_step(run_dir: Path) -> int:
+    """The env step of the checkpoint a rerun will resume from (0: none)."""
+    state = saved_state(run_dir)
+    return 0 if state is None else state["env_step"]
+
+
+def describe(state: dict[str, Any]) -> str:
+    """Where a checkpoint stands: ``env step 20000`` or, inside the burst of updates after
+    the warm-up, ``env step 20000, 2750 of its 5000 updates done``."""
+    episode = state.get("unfinished_episode")
+    inside = ("" if not episode else
+              f", {episode['updates_done']} of its {state['pending_updates']} updates done")
+    return f"env step {state['env_step']}{inside}"
 
 
 def verify(path: Path, options: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -133,9 +154,9 @@ def verify(path: Path, options: dict[str, Any] | None = None) -> dict[str, Any]:
     except (ValueError, KeyError, TypeError):
         raise CheckpointError(f"checkpoint {path}: {MANIFEST} is unreadable; delete the "
                               "checkpoint to start over") from None
-    if manifest.get("format") != FORMAT_VERSION:
+    if manifest.get("format") not in FORMATS:
         raise CheckpointError(f"checkpoint {path} has format {manifest.get('format')}, expected "
-                              f"{FORMAT_VERSION}; delete it to start over")
+                              f"{' or '.join(map(str, FORMATS))}; delete it to start over")
     missing = sorted(set(files) - set(_files(path)))
     if missing:
         raise CheckpointError(f"checkpoint {path} is incomplete: missing {', '.join(missing[:3])}; "

@@ -10,6 +10,7 @@ directory's checkpoint, or start its logs over) and ``train()``.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -111,12 +112,10 @@ class Trainer:
         if restored is not None:
             # (checkpoints from before unfinished_episode existed lack it: never inside updates)
             self.state.update({k: restored.get(k, self.state[k]) for k in self.state})
-            episode = self.state["unfinished_episode"]
             # Inside an episode's updates, no row of its env step is written yet.
-            dropped = self.log.truncate_after(self.state["env_step"] - (episode is not None))
-            inside = ("" if episode is None else f", {episode['updates_done']} of its "
-                      f"{self.state['pending_updates']} updates done")
-            print(f"resuming {self.run_dir} at env step {self.state['env_step']}{inside} "
+            inside = self.state["unfinished_episode"] is not None
+            dropped = self.log.truncate_after(self.state["env_step"] - inside)
+            print(f"resuming {self.run_dir} at {checkpoint.describe(self.state)} "
                   f"(dropped {dropped} log rows written after the checkpoint)")
         else:
             # No checkpoint: the run starts over, and so do its logs (killed before the
@@ -237,11 +236,12 @@ class Trainer:
         # train row is logged: a checkpoint taken in between (inside a long block of
         # updates) resumes the block where it stopped.
         while state["env_step"] < cfg.steps or state["unfinished_episode"] is not None:
-            if state["unfinished_episode"] is None:
+            resumed = state["unfinished_episode"] is not None
+            if not resumed:
                 self.collect_episode()
-            else:
-                self.progress.episode_started()
             metrics = self.episode_updates()
+            if resumed:  # the ETA's rate leaves out the rest of a block resumed half-way
+                self.progress.episode_started()
             self.end_episode(metrics)
 
     def collect_episode(self) -> None:
@@ -274,14 +274,18 @@ class Trainer:
         if state["env_step"] < cfg.seed_steps:
             return {}
         due = state["pending_updates"]
-        chunk = max(1, cfg.checkpoint_every // self.action_repeat * cfg.updates_per_step)
+        # An episode's own updates are one block, as before; only a longer one is split.
+        own = episode["length"] * cfg.updates_per_step
+        chunk = due if due <= own else (
+            math.ceil(cfg.checkpoint_every / self.action_repeat) * cfg.updates_per_step)
         self.progress.updating(due - episode["updates_done"])
         while episode["updates_done"] < due:
             start = time.perf_counter()
             n = min(chunk, due - episode["updates_done"])
-            self.update(n, due, episode["metrics"])
-            episode["updates_done"] += n
-            episode["seconds"] += time.perf_counter() - start
+            metrics = dict(episode["metrics"])  # the saved state changes only with updates_done
+            self.update(n, due, metrics)
+            episode.update(metrics=metrics, updates_done=episode["updates_done"] + n,
+                           seconds=episode["seconds"] + time.perf_counter() - start)
             if episode["updates_done"] < due:
                 checkpoint.save(self.run_dir, self.agent, self.buffer, state,
                                 self.checkpoint_options)
