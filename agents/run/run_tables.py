@@ -117,3 +117,33 @@ def evaluation_share(run_dir: Path) -> float | None:
         training += (step - previous) / float(row["steps_per_second"])
         previous = step
     return max(0.0, 1 - training / (60 * total))
+
+
+# Columns that measure the machine, not the run: two runs of the same code, seed and options
+# differ only there (on one machine; RESULTS.md, "What reproduces where").
+WALL_CLOCK_COLUMNS = ("wall_time", "steps_per_second")
+
+
+def differing_tables(run_a: Path, run_b: Path) -> list[str]:
+    """Which of two run directories' ``eval.csv`` and ``train.csv`` differ in any column but
+    the wall-clock ones, each with where it first does (``train.csv: from env step 2000,
+    loss_model, q_mean``); empty when the runs are the same to the last digit."""
+    differing = []
+    for table in ("eval.csv", "train.csv"):
+        tables = []
+        for run_dir in (run_a, run_b):
+            with (run_dir / table).open(newline="") as f:
+                tables.append([{k: v for k, v in row.items() if k not in WALL_CLOCK_COLUMNS}
+                               for row in csv.DictReader(f)])
+        a, b = tables
+        if a == b:
+            continue
+        first = next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), None)
+        if first is None:
+            differing.append(f"{table}: {len(a)} rows against {len(b)}")
+        else:
+            columns = sorted(k for k in a[first].keys() | b[first].keys()
+                             if a[first].get(k) != b[first].get(k))
+            differing.append(f"{table}: from env step {a[first].get('env_step')}, "
+                             f"{', '.join(columns)}")
+    return differing
