@@ -115,12 +115,12 @@ def main(argv: list[str] | None = None) -> int:
     (base, _), (head, _) = commits
     rows = [f"| config | {base[:10]} vs {head[:10]}, {args.steps} env steps, seed {args.seed} |",
             "|---|---|"]
-    for name in configs:
-        differing = differing_tables(runs[base, name], runs[head, name])
-        rows.append(f"| {name} | " + ("identical (eval.csv, train.csv)" if not differing
-                                       else "DIFFERENT: " + "; ".join(differing)) + " |")
+    differing = {name: differing_tables(runs[base, name], runs[head, name]) for name in configs}
+    for name, tables in differing.items():
+        rows.append(f"| {name} | " + ("DIFFERENT: " + "; ".join(tables) if tables
+                                       else "identical (eval.csv, train.csv)") + " |")
     print("\n".join(rows))
-    return 1 if any("DIFFERENT" in row for row in rows) else 0
+    return 1 if any(differing.values()) else 0
 
 
 if __name__ == "__main__":

@@ -39,7 +39,15 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from agents.run.results import Published, Run, find_runs, group_runs, read_published, seed_order
+from agents.run.results import (
+    Published,
+    Run,
+    find_runs,
+    group_runs,
+    read_published,
+    seed_order,
+    varying_options,
+)
 from agents.run.run_tables import evaluation_share, wall_minutes
 from agents.run.statistics import (
     Spread,
@@ -380,8 +388,7 @@ def rename_groups(labels: list[str], *tables: dict[str, object]) -> dict[str, st
 def values_of(flag: str, option: str, runs: list[Run]) -> list[str]:
     """The values ``option`` takes in ``runs``, in order; a one-line error naming the options
     that do vary if it does not."""
-    varying = sorted({k for r in runs for k in r.options
-                      if len({str(x.options.get(k)) for x in runs}) > 1} - {"seed"})
+    varying = [k for k in varying_options(runs) if k != "seed"]
     if option not in varying:
         raise SystemExit(f"geomdp-plot: error: {flag} {option!r} is not an option whose value "
                          f"differs between these runs; those that do: {', '.join(varying) or 'none'}")

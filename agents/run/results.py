@@ -59,12 +59,17 @@ def find_runs(paths: list[Path]) -> list[Run]:
     return runs
 
 
+def varying_options(runs: list[Run], ignored: tuple[str, ...] = ()) -> list[str]:
+    """The options whose value differs between ``runs``, but those starting with one of
+    ``ignored``, sorted."""
+    return sorted({k for r in runs for k in r.options
+                   if not k.startswith(ignored) and len({str(x.options.get(k)) for x in runs}) > 1})
+
+
 def group_runs(runs: list[Run], ignored: tuple[str, ...] = ()) -> dict[str, list[Run]]:
     """Runs keyed by the options that differ between them (seed and display options
     aside, and ``ignored``: e.g. an option added later whose default changes nothing)."""
-    keys = sorted({k for r in runs for k in r.options
-                   if not k.startswith(IGNORED_KEYS + tuple(ignored))
-                   and len({str(x.options.get(k)) for x in runs}) > 1})
+    keys = varying_options(runs, IGNORED_KEYS + tuple(ignored))
     groups: dict[str, list[Run]] = {}
     for r in runs:
         label = ", ".join(f"{k.split('.')[-1]}={r.options.get(k)}" for k in keys) or "all runs"

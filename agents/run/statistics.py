@@ -113,8 +113,7 @@ class Spread:
     def ranges(self) -> tuple[np.ndarray, np.ndarray]:
         """Per seed: max − min across levels of the mean return over evaluations, and of
         the final return."""
-        return (np.ptp(self.area, axis=1) if self.seeds else np.array([]),
-                np.ptp(self.final, axis=1) if self.seeds else np.array([]))
+        return np.ptp(self.area, axis=1), np.ptp(self.final, axis=1)
 
 
 def spread_over(runs: list[Run], option: str, levels: list[str] | None = None) -> Spread:
