@@ -26,6 +26,7 @@ from timing import best_time
 from agents.cli.train import CONFIG_DIR
 from agents.nn.spectral import GridActivation
 from agents.run import checkpoint
+from agents.run.checkpoint_state import checkpoint_paths
 from agents.run.config import RunOptions, check_task
 from agents.run.trainer import REPLAY_KEYS, build_parts
 from agents.tdmpc.agent import TDMPCAgent, _probe
@@ -59,7 +60,7 @@ def fill_replay(parts, env_steps: int, action_repeat: int) -> int:
 
 
 def checkpoint_megabytes(run_dir: Path) -> float:
-    return sum(p.stat().st_size for p in checkpoint.checkpoint_dir(run_dir).rglob("*") if p.is_file()) / 1e6
+    return sum(p.stat().st_size for p in checkpoint_paths(run_dir)[0].rglob("*") if p.is_file()) / 1e6
 
 
 def main() -> None:

@@ -37,7 +37,6 @@ import argparse
 import csv
 import datetime as dt
 import fnmatch
-import json
 import os
 import re
 import shlex
@@ -49,6 +48,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from agents.run.checkpoint_state import saved_step
 from agents.run.run_tables import wall_minutes
 
 REPO = Path(__file__).resolve().parent.parent
@@ -113,18 +113,6 @@ def logged_step(run_dir: Path) -> int:
     """The last evaluated env step in a run directory (-1: none)."""
     row = last_row(run_dir / "eval.csv")
     return int(row["env_step"]) if row else -1
-
-
-def checkpoint_step(run_dir: Path) -> int | None:
-    """The env step a restart resumes from (None: no checkpoint)."""
-    for name in ("checkpoint", "checkpoint.old"):
-        path = run_dir / name / "state.json"
-        if path.exists():
-            try:
-                return int(json.loads(path.read_text())["env_step"])
-            except (ValueError, KeyError):
-                return None
-    return None
 
 
 def running_pid(run_dir: Path) -> int | None:
@@ -208,7 +196,7 @@ def expected_minutes(run: Run, runs: list[Run], results: Path,
 
 
 def remaining_minutes(run: Run, full_minutes: float) -> float:
-    done = checkpoint_step(run.work) or 0
+    done = saved_step(run.work) or 0
     return STARTUP_MINUTES + (full_minutes - STARTUP_MINUTES) * max(0.0, 1 - done / run.steps)
 
 
@@ -409,12 +397,12 @@ class Queue:
             self.failed.add(run.dest)
             say(f"NOT STARTED {run.dest}: process {pid} (another queue?) is training it")
             return
-        committed = checkpoint_step(self.repo / run.dest)
-        if committed and committed > (checkpoint_step(run.work) or 0):
+        committed = saved_step(self.repo / run.dest)
+        if committed and committed > (saved_step(run.work) or 0):
             copy_logs(self.repo / run.dest, run.work, with_checkpoint=True)
             say(f"{run.dest}: took the checkpoint at env step {committed} committed by an "
                 "earlier session")
-        step, logged = checkpoint_step(run.work), logged_step(run.work)
+        step, logged = saved_step(run.work), logged_step(run.work)
         if step:
             how = f"resuming from its checkpoint at env step {step}"
         elif logged >= 0 or logged_step(self.repo / run.dest) >= 0:
@@ -457,7 +445,7 @@ class Queue:
     def carry(self, run: Run) -> None:
         """Commit a stopped carried-over run with its checkpoint, so that the next session
         resumes it on any machine (``start`` takes it when the worktree has none as far)."""
-        step = checkpoint_step(run.work)
+        step = saved_step(run.work)
         if step is None or not self.commit_results:
             return
         if problems := session_problems(run.work, self.commit):
@@ -482,7 +470,7 @@ class Queue:
             if status == 0 and logged_step(run.work) >= run.steps:
                 self.collect(run)
             elif status in (130, -signal.SIGTERM):
-                say(f"stopped {dest} at its checkpoint (env step {checkpoint_step(run.work)})")
+                say(f"stopped {dest} at its checkpoint (env step {saved_step(run.work)})")
                 if self.carried_over(run):
                     self.carry(run)
             else:

@@ -30,12 +30,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from run_queue import (  # noqa: E402
     REPO,
     PlanError,
-    checkpoint_step,
     logged_step,
     pinned_worktree,
     trainer_module,
 )
 
+from agents.run.checkpoint_state import saved_step  # noqa: E402
 from agents.run.run_tables import differing_tables  # noqa: E402
 
 # One of each kind of agent the experiments run: plain and a 2D group on PointMass2D, a
@@ -70,7 +70,7 @@ def train(python: str, worktree: Path, module: str, overrides: str, steps: int, 
           seed: int) -> None:
     """One run of ``overrides`` from ``worktree``'s code (``-m`` from its root imports its
     packages, not the installed ones); reused if already finished."""
-    if checkpoint_step(run_dir) == steps == logged_step(run_dir):
+    if saved_step(run_dir) == steps == logged_step(run_dir):
         print(f"  {run_dir}: finished before, reused", flush=True)
         return
     argv = [python, "-m", module, *shlex.split(overrides), *SHORT, f"train.steps={steps}",

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from agents.run.checkpoint_state import saved_step
+
 pytestmark = pytest.mark.slow  # runs stand-in trainers as subprocesses
 
 SPEC = importlib.util.spec_from_file_location(
@@ -143,9 +145,9 @@ def test_carried_over_runs_start_without_fitting_and_stop_at_the_deadline(repo: 
     queue.deadline = dt.datetime.now() + dt.timedelta(seconds=1.5)
     queue.carry_over_minutes = 0.0  # the 1.5 s left are enough for this stand-in trainer
     queue.run()
-    step = rq.checkpoint_step(queue.runs[0].work)
+    step = saved_step(queue.runs[0].work)
     assert step is not None and 0 < step < 400
-    assert rq.checkpoint_step(repo / "results/x/long/seed1") == step  # carried, not finished
+    assert saved_step(repo / "results/x/long/seed1") == step  # carried, not finished
     resumed = make_queue(repo, plan, 30, estimates=estimates, carry_over=["results/x/long"])
     resumed.run()
     assert rq.logged_step(repo / "results/x/long/seed1") == 400
@@ -161,10 +163,10 @@ def test_a_carried_run_is_committed_with_its_checkpoint_and_resumes_on_a_fresh_m
     queue = make_queue(repo, plan, 30, carry_over=["results/x/*"], carry_over_minutes=0.0)
     queue.deadline = dt.datetime.now() + dt.timedelta(seconds=1.5)
     queue.run()
-    step = rq.checkpoint_step(queue.runs[0].work)
+    step = saved_step(queue.runs[0].work)
     assert step is not None and 0 < step < 300
     dest = repo / "results/x/long/seed1"
-    assert rq.checkpoint_step(dest) == step and rq.logged_step(dest) == step
+    assert saved_step(dest) == step and rq.logged_step(dest) == step
     message = git(repo, "log", "-1", "--format=%s")
     assert f"results/x/long/seed1 carried at env step {step}" in message
     assert "results/x/long/seed1/checkpoint/state.json" in git(repo, "ls-files", "results")
@@ -240,7 +242,7 @@ def test_deadline_stops_runs_with_sigterm_and_they_resume(repo: Path) -> None:
     queue = make_queue(repo, plan, minutes_left=0.03, estimates=rq.parse_estimates(["*=0.01"]))
     assert queue.run() == 0
     run = queue.runs[0]
-    step = rq.checkpoint_step(run.work)
+    step = saved_step(run.work)
     assert step and 0 < step < 100000 and rq.logged_step(run.work) == step
     assert not (repo / run.dest).exists()  # unfinished: nothing copied, nothing committed
     queue = make_queue(repo, plan.replace("100000", str(step + 2)), minutes_left=60,
@@ -284,7 +286,7 @@ def test_a_restarted_queue_adopts_runs_still_training(repo: Path, capsys,
     start_outside_the_queue(queue, queue.runs[0])
     assert queue.run() == 0
     assert "stopped results/x/long/seed1 at its checkpoint" in capsys.readouterr().out
-    assert rq.checkpoint_step(queue.runs[0].work) and not (repo / "results/x/long").exists()
+    assert saved_step(queue.runs[0].work) and not (repo / "results/x/long").exists()
     # a process id written there whose process trains something else is not adopted
     (queue.runs[0].work / rq.PID_FILE).write_text(str(os.getpid()))
     assert rq.running_pid(queue.runs[0].work) is None
@@ -378,6 +380,6 @@ def test_an_adopted_carried_run_is_committed_with_its_checkpoint(repo: Path, cap
     start_outside_the_queue(queue, queue.runs[0])
     assert queue.run() == 0
     assert "adopted results/x/long/seed1" in capsys.readouterr().out
-    step = rq.checkpoint_step(queue.runs[0].work)
-    assert step and rq.checkpoint_step(repo / "results/x/long/seed1") == step
+    step = saved_step(queue.runs[0].work)
+    assert step and saved_step(repo / "results/x/long/seed1") == step
     assert f"carried at env step {step}" in git(repo, "log", "-1", "--format=%s")

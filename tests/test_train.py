@@ -1,6 +1,5 @@
 """geomdp-train: smoke run, determinism, resume, and bad input."""
 
-import csv
 import json
 import os
 import signal
@@ -12,6 +11,7 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 from agents.cli.train import CONFIG_DIR, rewrite_env_shorthand, run
+from agents.run.run_tables import rows_without_wall_clock
 
 # A run small enough for CI: 125-step episodes, one evaluation episode, a tiny agent.
 TINY = ["env.action_repeat=8", "train.steps=2000", "train.seed_steps=1000",
@@ -29,9 +29,7 @@ def config(*overrides):
         return compose("train", overrides=[*TINY, *overrides])
 
 
-def rows(path, drop=("wall_time", "steps_per_second")):
-    with open(path, newline="") as f:
-        return [{k: v for k, v in r.items() if k not in drop} for r in csv.DictReader(f)]
+rows = rows_without_wall_clock  # what a resumed run must share with an uninterrupted one
 
 
 @pytest.mark.slow

@@ -33,6 +33,7 @@ from omegaconf import DictConfig, OmegaConf
 from agents.cli.launch import exit_interrupted
 from agents.options import OptionError, unknown
 from agents.run import checkpoint
+from agents.run.checkpoint_state import describe, saved_state
 from agents.run.config import RunOptions, check_task, record_declaration
 from agents.run.run_dir import (
     RunDirError,
@@ -137,8 +138,8 @@ def run(cfg: DictConfig, run_dir: Path, hydra_records: tuple[DictConfig, DictCon
     except KeyboardInterrupt:
         for s in previous:  # stopping: a further signal must not interrupt the report
             signal.signal(s, signal.SIG_IGN)
-        saved = checkpoint.saved_state(run_dir)
-        where = (f"the last checkpoint is at {checkpoint.describe(saved)}: run the same command "
+        saved = saved_state(run_dir)
+        where = (f"the last checkpoint is at {describe(saved)}: run the same command "
                  "to continue" if saved and saved["env_step"] else
                  "no checkpoint yet: the same command starts the run over")
         print(f"\ninterrupted; {where}", file=sys.stderr)

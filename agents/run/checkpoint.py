@@ -30,6 +30,7 @@ import torch
 from torchrl.data import TensorDictReplayBuffer
 
 from agents.run import faults
+from agents.run.checkpoint_state import checkpoint_paths
 from agents.run.nested import differences, with_added_later
 from agents.tdmpc.agent import TDMPCAgent
 from agents.tdmpc.replay import load_replay, save_replay
@@ -51,14 +52,6 @@ class CheckpointWriteError(CheckpointError):
     """A checkpoint that could not be written (disk full, permissions); the last one stays."""
 
 
-def checkpoint_dir(run_dir: Path) -> Path:
-    return run_dir / "checkpoint"
-
-
-def _paths(run_dir: Path) -> tuple[Path, Path, Path]:
-    return checkpoint_dir(run_dir), run_dir / "checkpoint.tmp", run_dir / "checkpoint.old"
-
-
 def _sha256(path: Path) -> str:
     digest = hashlib.sha256()
     with path.open("rb") as f:
@@ -74,7 +67,7 @@ def _files(root: Path) -> list[str]:
 def save(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
          loop_state: dict[str, Any], options: dict[str, Any] | None = None) -> None:
     """Write a checkpoint atomically; ``options`` (the run's config) must match on load."""
-    final, tmp, old = _paths(run_dir)
+    final, tmp, old = checkpoint_paths(run_dir)
     try:
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir()
@@ -105,7 +98,7 @@ def save(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
 
 def recover(run_dir: Path) -> Path | None:
     """The directory of the last complete checkpoint, after undoing an interrupted swap."""
-    final, tmp, old = _paths(run_dir)
+    final, tmp, old = checkpoint_paths(run_dir)
     if final.exists():
         for stale in (old, tmp):
             shutil.rmtree(stale, ignore_errors=True)
@@ -115,31 +108,6 @@ def recover(run_dir: Path) -> Path | None:
         shutil.rmtree(tmp, ignore_errors=True)
         return final
     return None
-
-
-def saved_state(run_dir: Path) -> dict[str, Any] | None:
-    """The loop state of the checkpoint a rerun will resume from (None: none); a save
-    interrupted mid-swap leaves it under ``checkpoint.old``."""
-    for path in (checkpoint_dir(run_dir), run_dir / "checkpoint.old"):
-        state = path / "state.json"
-        if state.exists():
-            return json.loads(state.read_text())
-    return None
-
-
-def saved_step(run_dir: Path) -> int:
-    """The env step of the checkpoint a rerun will resume from (0: none)."""
-    state = saved_state(run_dir)
-    return 0 if state is None else state["env_step"]
-
-
-def describe(state: dict[str, Any]) -> str:
-    """Where a checkpoint stands: ``env step 20000`` or, inside the burst of updates after
-    the warm-up, ``env step 20000, 2750 of its 5000 updates done``."""
-    episode = state.get("unfinished_episode")
-    inside = ("" if not episode else
-              f", {episode['updates_done']} of its {state['pending_updates']} updates done")
-    return f"env step {state['env_step']}{inside}"
 
 
 def verify(path: Path, options: dict[str, Any] | None = None) -> dict[str, Any]:

@@ -124,18 +124,21 @@ def evaluation_share(run_dir: Path) -> float | None:
 WALL_CLOCK_COLUMNS = ("wall_time", "steps_per_second")
 
 
+def rows_without_wall_clock(path: Path) -> list[dict[str, str]]:
+    """A run's CSV table without the wall-clock columns: what two runs of the same code,
+    seed and options on one machine must share to the last digit."""
+    with Path(path).open(newline="") as f:
+        return [{k: v for k, v in row.items() if k not in WALL_CLOCK_COLUMNS}
+                for row in csv.DictReader(f)]
+
+
 def differing_tables(run_a: Path, run_b: Path) -> list[str]:
     """Which of two run directories' ``eval.csv`` and ``train.csv`` differ in any column but
     the wall-clock ones, each with where it first does (``train.csv: from env step 2000,
     loss_model, q_mean``); empty when the runs are the same to the last digit."""
     differing = []
     for table in ("eval.csv", "train.csv"):
-        tables = []
-        for run_dir in (run_a, run_b):
-            with (run_dir / table).open(newline="") as f:
-                tables.append([{k: v for k, v in row.items() if k not in WALL_CLOCK_COLUMNS}
-                               for row in csv.DictReader(f)])
-        a, b = tables
+        a, b = (rows_without_wall_clock(run_dir / table) for run_dir in (run_a, run_b))
         if a == b:
             continue
         first = next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), None)

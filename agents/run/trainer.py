@@ -24,6 +24,7 @@ from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs import TransformedEnv
 
 from agents.run import checkpoint, faults
+from agents.run.checkpoint_state import describe
 from agents.run.config import RunOptions, Task
 from agents.run.envs import make_gym_env, torchrl_env
 from agents.run.progress import Progress
@@ -115,7 +116,7 @@ class Trainer:
             # Inside an episode's updates, no row of its env step is written yet.
             inside = self.state["unfinished_episode"] is not None
             dropped = self.log.truncate_after(self.state["env_step"] - inside)
-            print(f"resuming {self.run_dir} at {checkpoint.describe(self.state)} "
+            print(f"resuming {self.run_dir} at {describe(self.state)} "
                   f"(dropped {dropped} log rows written after the checkpoint)")
         else:
             # No checkpoint: the run starts over, and so do its logs (killed before the
