@@ -18,7 +18,7 @@ def test_readme_is_at_most_250_lines():
 def test_readme_test_commands_are_cis_and_the_fast_subset():
     text = README.read_text()
     ci = (ROOT / ".ci/run").read_text().strip().splitlines()[-1]
-    assert ci == "bash scripts/bootstrap.sh && .venv/bin/python -m pytest -q"
+    assert ci == "bash scripts/bootstrap.sh && .venv/bin/python -m pytest -q -n auto"
     assert ci in text and "bash scripts/bootstrap.sh && .venv/bin/geomdp-train" in text
     assert '.venv/bin/python -m pytest -q -m "not slow"' in text
 
