@@ -19,6 +19,7 @@ import collections
 
 import escnn.nn as enn
 import gymnasium
+import yaml
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
 from agents.nn.escnn_groups import field_type, group_for_task
@@ -51,7 +52,7 @@ def task(spec: str) -> tuple[str, dict]:
         key, sep, value = item.partition("=")
         if not sep:
             raise SystemExit(f"latent_capacity: error: {item!r} in {spec!r} is not KEY=VALUE")
-        kwargs[key] = int(value) if value.lstrip("-").isdigit() else value
+        kwargs[key] = yaml.safe_load(value)  # as geomdp-check's --kwarg: 0.03 is a float
     return env_id, kwargs
 
 

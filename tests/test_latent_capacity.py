@@ -33,6 +33,11 @@ def test_a_shortfall_the_headline_agent_learns_with():
     assert fields == 2 and list(short.values()) == [(3, 2)]
 
 
+def test_task_values_are_read_as_geomdp_check_reads_them():
+    assert lc.task(f"{POINTMASS3D}:n_balls=2,target_size=0.03,walls=true") == (
+        POINTMASS3D, {"n_balls": 2, "target_size": 0.03, "walls": True})
+
+
 def test_the_table_and_a_bad_task_spec(capsys):
     assert lc.main([f"{POINTMASS3D}:n_balls=2", "--groups", "octahedral"]) == 0
     row = "| GeoMDP/PointMass3D-v0 n_balls=2 | octahedral | linear | 1 | (1,): 4 vs 3 |"
