@@ -48,13 +48,13 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from agents.run.checkpoint_state import saved_step
+from agents.run.checkpoint_state import LOCK_FILE, WRITE_PROBE, checkpoint_paths, saved_step
 from agents.run.run_tables import wall_minutes
 
 REPO = Path(__file__).resolve().parent.parent
-LOG_FILES_SKIPPED = ("checkpoint", "checkpoint.tmp", "checkpoint.old", ".geomdp-write-test",
-                     "run_queue.pid", "run.lock")
 PID_FILE = "run_queue.pid"  # the trainer's process id while a queue runs it
+CHECKPOINT, *CHECKPOINT_SWAP = (path.name for path in checkpoint_paths(Path()))
+LOG_FILES_SKIPPED = (CHECKPOINT, *CHECKPOINT_SWAP, WRITE_PROBE, PID_FILE, LOCK_FILE)
 STARTUP_MINUTES = 1.0  # building the agent and the first evaluation's set-up, per start
 
 
@@ -219,7 +219,7 @@ def copy_logs(src: Path, dest: Path, with_checkpoint: bool = False) -> None:
     """The run's logs, without its checkpoints (``with_checkpoint``: with its last complete
     one, for a carried run), replace ``dest``: copied beside it first, so that an
     interrupted copy never leaves a ``dest`` that looks finished."""
-    skipped = [n for n in LOG_FILES_SKIPPED if not (with_checkpoint and n == "checkpoint")]
+    skipped = [n for n in LOG_FILES_SKIPPED if not (with_checkpoint and n == CHECKPOINT)]
     partial = dest.with_name(dest.name + ".copying")
     shutil.rmtree(partial, ignore_errors=True)
     shutil.copytree(src, partial, ignore=shutil.ignore_patterns(*skipped))
@@ -453,7 +453,7 @@ class Queue:
             say(f"NOT CARRIED {run.dest}: {'; '.join(problems)}")
             return
         copy_logs(run.work, self.repo / run.dest, with_checkpoint=True)
-        size = sum(p.stat().st_size for p in (self.repo / run.dest / "checkpoint").rglob("*")
+        size = sum(p.stat().st_size for p in (self.repo / run.dest / CHECKPOINT).rglob("*")
                    if p.is_file())
         message = (f"Run queue: {run.dest} carried at env step {step} (code {self.commit[:10]}; "
                    f"checkpoint {size / 2**20:.1f} MiB committed so the next session resumes "

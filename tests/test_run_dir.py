@@ -1,6 +1,7 @@
 """The run directory: one process at a time, and records that show only options the
 run really used."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -9,7 +10,8 @@ import pytest
 from test_train import TINY, TRAIN, config
 
 from agents.cli.train import run
-from agents.run.run_dir import RunDirLock
+from agents.run.checkpoint_state import WRITE_PROBE, checkpoint_paths
+from agents.run.run_dir import RunDirError, RunDirLock, check_writable
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -110,3 +112,27 @@ def test_constructing_a_trainer_writes_nothing(tmp_path):
     assert trainer.restore() == 0  # no checkpoint: a new run, its session recorded
     assert (tmp_path / "logs" / "sessions.csv").read_text().count("\n") == 2
     assert list(run_dir.iterdir()) == []
+
+
+def test_a_run_directory_that_cannot_be_written_is_refused_in_one_line(tmp_path):
+    """The write probe fails (here: a directory stands at its name, which fails even for
+    root, who may write anywhere): refused before the run starts, naming the directory."""
+    (tmp_path / WRITE_PROBE).mkdir()
+    with pytest.raises(RunDirError, match=r"^cannot write in the run directory .*hydra\.run\.dir"):
+        check_writable(tmp_path)
+
+
+@pytest.mark.parametrize("which", range(3))
+def test_an_unwritable_checkpoint_or_swap_partner_is_refused(tmp_path, monkeypatch, which):
+    """Every directory a save replaces (the checkpoint, the one being written, the one being
+    replaced) is checked, nested ones included; os.access stands in for permissions, which
+    root (this suite's CI user) bypasses."""
+    locked = checkpoint_paths(tmp_path)[which] / "agent"
+    for path in checkpoint_paths(tmp_path):
+        (path / "agent").mkdir(parents=True)
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode: Path(p) != locked and real_access(p, mode))
+    with pytest.raises(RunDirError, match=rf"^{locked} is not writable: "):
+        check_writable(tmp_path)
+    monkeypatch.setattr(os, "access", real_access)
+    check_writable(tmp_path)  # writable again: accepted

@@ -1,9 +1,10 @@
 """Where a run's checkpoint stands, read without torch.
 
-The checkpoint's directory layout and its loop state (``state.json``), for the code that
-only needs to know how far a run got: the run queue (which must not import torch), the
-trainer's resume and interrupt messages. Writing and verifying checkpoints is
-``agents.run.checkpoint``'s job.
+The names of the files a run directory holds beside its logs (the checkpoint and its swap
+partners, the lock, the write probe) and the checkpoint's loop state (``state.json``), for
+the code that only needs to know how far a run got or which files are not logs: the run
+queue (which must not import torch), the trainer's resume and interrupt messages. Writing
+and verifying checkpoints is ``agents.run.checkpoint``'s job.
 """
 
 from __future__ import annotations
@@ -11,6 +12,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 from typing import Any
+
+LOCK_FILE = "run.lock"  # held by the trainer for as long as it uses the directory
+WRITE_PROBE = ".geomdp-write-test"  # written and removed to test that the directory is writable
 
 
 def checkpoint_paths(run_dir: Path) -> tuple[Path, Path, Path]:

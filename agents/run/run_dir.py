@@ -13,10 +13,9 @@ from typing import IO, Any
 from omegaconf import DictConfig, OmegaConf
 
 from agents.options import OptionError, show
+from agents.run.checkpoint_state import LOCK_FILE, WRITE_PROBE, checkpoint_paths
 from agents.run.config import RESUMABLE_KEYS, fixed_options
 from agents.run.nested import differences, flatten, with_added_later
-
-LOCK_FILE = "run.lock"
 
 
 class RunDirError(OptionError):
@@ -36,15 +35,15 @@ def make_run_dir(run_dir: Path) -> None:
 
 def check_writable(run_dir: Path) -> None:
     """Refuse, in one line, a run directory (or left-over checkpoint) that cannot be written."""
-    probe = run_dir / ".geomdp-write-test"
+    probe = run_dir / WRITE_PROBE
     try:
         probe.write_text("ok")
         probe.unlink()
     except OSError as err:
         raise RunDirError(f"cannot write in the run directory {run_dir} ({err.strerror}); "
                           "choose another hydra.run.dir or fix its permissions") from None
-    for name in ("checkpoint", "checkpoint.old", "checkpoint.tmp"):
-        for path in [run_dir / name, *(run_dir / name).rglob("*")]:
+    for checkpoint in checkpoint_paths(run_dir):
+        for path in [checkpoint, *checkpoint.rglob("*")]:
             if path.is_dir() and not os.access(path, os.W_OK | os.X_OK):
                 raise RunDirError(f"{path} is not writable: the run could not replace its "
                                   "checkpoint; fix its permissions")
