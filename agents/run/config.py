@@ -16,6 +16,7 @@ import gymnasium
 import torch
 
 from agents.compat.torchrl import prioritized_replay_refusal
+from agents.nn.capacity import encoder_shortfall
 from agents.nn.escnn_groups import group_for_task
 from agents.options import OptionError, check, from_dict, option
 from agents.run.envs import TASK_ENVS, EnvOptions, make_gym_env
@@ -200,7 +201,8 @@ def check_declaration(options: RunOptions, env: gymnasium.Env, symmetry: Symmetr
 def check_task(options: RunOptions) -> Task:
     """The checks that need this machine or the task: the device and logger are here,
     the env is made (its own checks of its kwargs; the run then trains in it), the agent's
-    group and augmentation fit the task's declaration; warns once for an approximate group.
+    group and augmentation fit the task's declaration; warns once for an approximate group
+    and for an equivariant encoder too narrow to carry the observation.
     (Options alone are checked by the dataclasses, so reading a run's config needs
     neither its device nor its task.)"""
     if options.device.startswith("cuda") and not torch.cuda.is_available():
@@ -241,4 +243,6 @@ def _checked_task(options: RunOptions, env: gymnasium.Env) -> Task:
             warnings.warn(f"{agent.group} is only an approximate symmetry of {options.env.id} "
                           f"(exact group: {task.symmetry.exact_group}); training anyway",
                           stacklevel=1)
+        if short := encoder_shortfall(agent, task.symmetry):
+            warnings.warn(short, stacklevel=1)
     return task
