@@ -48,11 +48,12 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|---|" + "---|" * len(LAYERS))
     for env_id, kwargs in args.tasks:
         name = env_id + "".join(f" {k}={v}" for k, v in kwargs.items())
+        symmetry = gymnasium.make(env_id, **kwargs).unwrapped.symmetry
         for group in args.groups:
             for width in args.widths:
                 config = NetworkConfig(group=group, width_strategy=width, networks=Architecture(
                     hidden_dim=args.hidden_dim, latent_dim=args.latent_dim, encoder_dim=args.encoder_dim))
-                table = shortfalls(config, gymnasium.make(env_id, **kwargs).unwrapped.symmetry)
+                table = shortfalls(config, symmetry)
                 cells = [f"{fields}, " + (", ".join(f"{irrep}: {n} vs {m}" for irrep, (n, m)
                                                     in short.items()) or "none")
                          for fields, short in table.values()]

@@ -25,7 +25,7 @@ import itertools
 
 import escnn.nn as enn
 
-from agents.nn.escnn_groups import group_for_task
+from agents.nn.escnn_groups import AgentGroup, group_for_task
 from agents.nn.networks import NetworkConfig, Space, regular_copies
 from geomdp_envs.symmetry import Symmetry
 
@@ -39,18 +39,20 @@ def irrep_copies(layout: enn.FieldType) -> collections.Counter:
     return collections.Counter(irrep for rep in layout.representations for irrep in rep.irreps)
 
 
-def shortfalls(config: NetworkConfig, symmetry: Symmetry) -> dict[str, tuple[int, Shortfall]]:
-    """Per layer of ``LAYERS``, for the agent ``config`` describes (with a group): its
-    fields, and the irreps it holds fewer copies of than it must pass on."""
+def shortfalls(config: NetworkConfig, symmetry: Symmetry,
+               layers: tuple[str, ...] = LAYERS) -> dict[str, tuple[int, Shortfall]]:
+    """Per layer of ``layers`` (some of ``LAYERS``), for the agent ``config`` describes (with
+    a group): its fields, and the irreps it holds fewer copies of than it must pass on."""
     nets = config.networks
-    group = group_for_task(config.group, symmetry, nets.max_frequency, nets.grid_frequency)[0]
+    group = _agent_group(config, symmetry)
     space = Space(symmetry.observation, symmetry.action, group, config)
     observation, action = irrep_copies(space.observation), irrep_copies(space.action)
     needs = {"encoder hidden": (nets.hidden_blocks("encoder")[0], observation),
              "latent": (nets.latent_dim, observation),
              "dynamics hidden": (nets.hidden_blocks("dynamics")[0], observation + action)}
     table = {}
-    for layer, (width, need) in needs.items():
+    for layer in layers:
+        width, need = needs[layer]
         held = irrep_copies(space.regular(width))
         table[layer] = (regular_copies(width, group, config.width_strategy),
                         {irrep: (n, held[irrep]) for irrep, n in sorted(need.items()) if held[irrep] < n})
@@ -62,11 +64,11 @@ def encoder_shortfall(config: NetworkConfig, symmetry: Symmetry) -> str | None:
     (None when they can, or the encoder is plain), with the encoder width that would."""
     if config.group is None or not config.equivariant.get("transition", True):
         return None
-    fields, short = shortfalls(config, symmetry)["encoder hidden"]
+    fields, short = shortfalls(config, symmetry, ("encoder hidden",))["encoder hidden"]
     if not short:
         return None
     nets = config.networks
-    group = group_for_task(config.group, symmetry, nets.max_frequency, nets.grid_frequency)[0]
+    group = _agent_group(config, symmetry)
     per_field = irrep_copies(group.gspace.type(group.regular))
     lacking = ", ".join(f"{held} of the observation's {needed} copies of irrep {irrep}"
                         for irrep, (needed, held) in short.items())
@@ -81,3 +83,8 @@ def encoder_shortfall(config: NetworkConfig, symmetry: Symmetry) -> str | None:
     return (f"agent.group={config.group} at width_strategy={config.width_strategy}: {layers} hold "
             f"{lacking}, so part of the state never reaches the agent; {remedy} "
             "(scripts/field_capacity.py)")
+
+
+def _agent_group(config: NetworkConfig, symmetry: Symmetry) -> AgentGroup:
+    nets = config.networks
+    return group_for_task(config.group, symmetry, nets.max_frequency, nets.grid_frequency)[0]
