@@ -20,11 +20,20 @@ from geomdp_envs.check import check_symmetry, declaration_table
 from geomdp_envs.declare import declare, shipped_declarations, symmetry_of
 
 
+def parse_env_kwarg(text: str) -> tuple[str, object]:
+    """``target_size=0.03`` -> ("target_size", 0.03): a keyword argument of gymnasium.make
+    from the shell, its value read as YAML reads it (numbers, booleans, strings)."""
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise ValueError(f"{text!r} is not KEY=VALUE")
+    return name, yaml.safe_load(value)
+
+
 def _kwarg(text: str) -> tuple[str, object]:
-    if "=" not in text:
-        raise argparse.ArgumentTypeError(f"--kwarg {text!r}: write it as name=value")
-    name, value = text.split("=", 1)
-    return name, yaml.safe_load(value)  # numbers, booleans and strings as YAML reads them
+    try:
+        return parse_env_kwarg(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -14,11 +14,11 @@ from __future__ import annotations
 import argparse
 
 import gymnasium
-import yaml
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
 from agents.nn.capacity import LAYERS, shortfalls
 from agents.nn.networks import WIDTH_STRATEGIES, Architecture, NetworkConfig
+from geomdp_envs.check_cli import parse_env_kwarg
 
 
 def task(spec: str) -> tuple[str, dict]:
@@ -26,10 +26,11 @@ def task(spec: str) -> tuple[str, dict]:
     env_id, _, rest = spec.partition(":")
     kwargs = {}
     for item in filter(None, rest.split(",")):
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise SystemExit(f"field_capacity: error: {item!r} in {spec!r} is not KEY=VALUE")
-        kwargs[key] = yaml.safe_load(value)  # as geomdp-check's --kwarg: 0.03 is a float
+        try:
+            key, value = parse_env_kwarg(item)
+        except ValueError as error:
+            raise SystemExit(f"field_capacity: error: in {spec!r}: {error}") from None
+        kwargs[key] = value
     return env_id, kwargs
 
 

@@ -104,5 +104,5 @@ def test_the_table_and_a_bad_task_spec(capsys):
     assert fc.main([f"{POINTMASS3D}:n_balls=2", "--groups", "octahedral"]) == 0
     row = "| GeoMDP/PointMass3D-v0 n_balls=2 | octahedral | linear | 5, none | 1, (1,): 4 vs 3 | 5, none |"
     assert row in capsys.readouterr().out
-    with pytest.raises(SystemExit, match="'n_balls' in .* is not KEY=VALUE"):
+    with pytest.raises(SystemExit, match="in .*: 'n_balls' is not KEY=VALUE"):
         fc.main([f"{POINTMASS3D}:n_balls", "--groups", "octahedral"])

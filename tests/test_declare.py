@@ -388,6 +388,11 @@ def test_geomdp_check_reports_and_exits_by_verdict(tmp_path, capsys, upright_pen
         assert check_main(argv) == 2
         (line,) = capsys.readouterr().err.strip().splitlines()
         assert line.startswith("geomdp-check: error: ") and message in line
+    with pytest.raises(SystemExit) as exit_info:  # argparse's own exit: status 2, one line
+        check_main(["Reacher-v5", "reacher_v5", "--kwarg", "xml_file"])
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        "geomdp-check: error: argument --kwarg: 'xml_file' is not KEY=VALUE")
 
 
 def test_unreadable_declarations_and_direct_construction(tmp_path):
