@@ -70,6 +70,10 @@ def signed(mean_low_high: tuple[float, float, float]) -> str:
     return "{:+.1f} [{:+.1f}, {:+.1f}]".format(*mean_low_high)
 
 
+def seeds_text(count: int) -> str:
+    return f"{count} seed" if count == 1 else f"{count} seeds"
+
+
 def require_groups(option: str, names: list[str], groups: dict[str, list[Run]]) -> None:
     """A one-line error for an option naming a group that is not in the table."""
     unknown = [n for n in names if n not in groups]
@@ -290,7 +294,7 @@ def spread_plot(agents: dict[str, Spread], option: str, out: Path, title: str,
         x = np.array([levels.index(level) for level in spread.levels])
         cis = np.array([mean_ci(column) for column in spread.area.T])
         line = ax.errorbar(x, cis[:, 0], yerr=np.stack([cis[:, 0] - cis[:, 1], cis[:, 2] - cis[:, 0]]),
-                           marker="o", capsize=4, label=f"{label} ({len(spread.seeds)} seeds)")
+                           marker="o", capsize=4, label=f"{label} ({seeds_text(len(spread.seeds))})")
         for per_seed in spread.area:
             ax.plot(x, per_seed, color=line[0].get_color(), alpha=0.3, linewidth=1)
     ax.set_xticks(range(len(levels)), [str(level) for level in levels])
@@ -341,7 +345,7 @@ def plot(panels: dict[str, dict[str, list[Run]]], out: Path, title: str,
         for label, runs in groups.items():
             colour = colours.setdefault(label, f"C{len(colours) % 10}")
             steps, mean, low, high, n = curve(runs)
-            ax.plot(steps, mean, color=colour, label=f"{label} ({len(runs)} seeds)")
+            ax.plot(steps, mean, color=colour, label=f"{label} ({seeds_text(len(runs))})")
             ax.fill_between(steps, low, high, color=colour, alpha=0.2, linewidth=0)
         for value, name in references:
             ax.axhline(value, color="black", linestyle="--", linewidth=1, label=name)
