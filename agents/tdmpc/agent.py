@@ -54,9 +54,11 @@ class Schedule:
 
 @dataclass
 class TDMPCConfig(NetworkConfig):
-    """TD-MPC's hyperparameters (Hansen et al. 2022 defaults unless a preset says
-    otherwise), nested as the ``agent`` section of a run's config. It extends
-    ``NetworkConfig``: the agent's config is what ``build_networks`` takes."""
+    """TD-MPC's hyperparameters, nested as the ``agent`` section of a run's config. The
+    planner's, losses', replay's and schedules' defaults are TD-MPC's (Hansen et al. 2022);
+    the networks' (latent 64, width 256, ``sqrt``) are neither preset's, and a run's preset
+    (``configs/agent/``) sets every value. It extends ``NetworkConfig``: the agent's config
+    is what ``build_networks`` takes."""
 
     KEY: typing.ClassVar[str] = "agent"
     planner: PlannerConfig = field(default_factory=PlannerConfig)
