@@ -24,14 +24,16 @@ _EXPORTS = {
     "build_networks": "agents.nn.networks", "project": "agents.nn.networks",
     "squash": "agents.nn.networks",
     "TDMPCAgent": "agents.tdmpc.agent", "TDMPCConfig": "agents.tdmpc.agent",
+    "agent_config": "agents.run.presets",
 }
 __all__ = ["AgentGroup", "Architecture", "NetworkConfig", "Networks", "TDMPCAgent", "TDMPCConfig",
-           "build_networks", "field_type", "group_for_task", "make_group", "project", "squash",
-           "valid_groups"]
+           "agent_config", "build_networks", "field_type", "group_for_task", "make_group", "project",
+           "squash", "valid_groups"]
 
 if TYPE_CHECKING:
     from agents.nn.escnn_groups import AgentGroup, field_type, group_for_task, make_group, valid_groups
     from agents.nn.networks import Architecture, NetworkConfig, Networks, build_networks, project, squash
+    from agents.run.presets import agent_config
     from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
 
 

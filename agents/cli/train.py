@@ -24,17 +24,16 @@ from collections.abc import Callable
 from pathlib import Path
 
 import hydra
-from hydra import compose, initialize_config_dir
 from hydra.core.hydra_config import HydraConfig
-from hydra.errors import ConfigCompositionException, MissingConfigException, OverrideParseException
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from agents.cli.launch import exit_interrupted
-from agents.options import OptionError, unknown
+from agents.options import OptionError
 from agents.run import checkpoint
 from agents.run.checkpoint_state import describe, saved_state
 from agents.run.config import RunOptions, check_task, record_declaration
+from agents.run.presets import CONFIG_DIR, compose_config
 from agents.run.run_dir import (
     RunDirError,
     RunDirLock,
@@ -49,15 +48,6 @@ from agents.run.run_log import RunLog
 from agents.run.run_tables import RunLogError
 from agents.run.trainer import StopRequest, Trainer, build_parts
 
-
-def _config_dir() -> Path:
-    """The configs shipped inside an installed package (``agents/configs``, put there
-    by the wheel), else the checkout's top-level ``configs/``."""
-    packaged = Path(__file__).resolve().parents[1] / "configs"
-    return packaged if packaged.is_dir() else Path(__file__).resolve().parents[2] / "configs"
-
-
-CONFIG_DIR = _config_dir()
 MAX_DIRNAME = 120
 
 
@@ -180,11 +170,6 @@ def rewrite_env_shorthand(argv: list[str]) -> list[str]:
     return out
 
 
-def _compose(overrides: list[str]) -> DictConfig:
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        return compose("train", overrides=overrides, return_hydra_config=True)
-
-
 def command_line_error(overrides: list[str]) -> str | None:
     """What Hydra would refuse in a many-line report (an unknown key, an unknown config
     group option, an unparsable override), said in one line; then the run directory,
@@ -194,28 +179,7 @@ def command_line_error(overrides: list[str]) -> str | None:
     if any(arg.startswith("-") for arg in overrides):
         return None
     try:
-        cfg = _compose(overrides)
-    except MissingConfigException as err:
-        group, _, name = (err.missing_cfg_file or "").rpartition("/")
-        valid = ", ".join(err.options or []) or "none found"
-        return f"unknown {group or 'config'}={name}; valid: {valid}"
-    except OverrideParseException as err:
-        return f"cannot parse an override: {str(err).splitlines()[0]}"
-    except ConfigCompositionException as err:
-        bad = getattr(err.__cause__, "full_key", None)
-        if not bad:
-            return " ".join(str(err).split())
-        parent, _, _ = str(bad).rpartition(".")
-        rest = [o for o in overrides if not o.lstrip("+~").startswith(f"{bad}=")]
-        try:
-            base = _compose(rest)
-            node = OmegaConf.select(base, parent) if parent else base
-        except (ConfigCompositionException, MissingConfigException, OverrideParseException):
-            node = None
-        valid = [k for k in node.keys() if k != "hydra"] if isinstance(node, DictConfig) else []
-        return str(unknown(str(bad), valid))
-    try:
-        make_run_dir(Path(cfg.hydra.run.dir))
+        make_run_dir(Path(compose_config(overrides, hydra=True).hydra.run.dir))
     except OptionError as err:
         return str(err)
     return None
