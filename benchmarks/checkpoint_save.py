@@ -19,15 +19,14 @@ import tempfile
 from pathlib import Path
 
 import torch
-from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 from timing import best_time
 
-from agents.cli.train import CONFIG_DIR
 from agents.nn.spectral import GridActivation
 from agents.run import checkpoint
 from agents.run.checkpoint_state import checkpoint_paths
 from agents.run.config import RunOptions, check_task
+from agents.run.presets import compose_config
 from agents.run.trainer import REPLAY_KEYS, build_parts
 from agents.tdmpc.agent import TDMPCAgent, _probe
 
@@ -74,9 +73,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3.0, help="timing budget per measurement")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = compose("train", overrides=[f"env={args.env}", f"agent={args.preset}",
-                                          f"agent.group={args.group}"])
+    cfg = compose_config([f"env={args.env}", f"agent={args.preset}", f"agent.group={args.group}"])
     options = RunOptions.from_config(OmegaConf.to_container(cfg, resolve=True))
     task = check_task(options)
     print(f"building the {args.preset} {args.group} agent on {args.env} ...", flush=True)

@@ -6,13 +6,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hydra import compose, initialize_config_dir
 from scipy import stats
 from test_train import TINY, TRAIN
 
 from agents.cli import plot
-from agents.cli.train import CONFIG_DIR
 from agents.run import results, statistics
+from agents.run.presets import CONFIG_DIR, compose_config
 from agents.run.run_tables import evaluation_share, wall_minutes
 from agents.run.td_invariants import bootstrapped_returns, td_invariants
 
@@ -27,8 +26,7 @@ def test_there_is_a_paper_and_a_cpu_config_per_figure():
 
 @pytest.mark.parametrize("name", EXPERIMENTS)
 def test_experiment_config_composes_into_a_valid_sweep(name):
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = compose("train", overrides=[f"+experiment={name}"], return_hydra_config=True)
+    cfg = compose_config([f"+experiment={name}"], hydra=True)
     params = cfg.hydra.sweeper.params
     assert "seed" in params and len(str(params.seed).split(",")) == (3 if name.endswith("_cpu") else 5)
     hidden = cfg.agent.networks.hidden_dim

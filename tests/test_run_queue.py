@@ -336,16 +336,14 @@ def test_every_plan_line_is_a_valid_run():
     this code renamed fails here."""
     import warnings
 
-    from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from agents.cli.train import CONFIG_DIR
     from agents.run.config import RunOptions, check_task
+    from agents.run.presets import compose_config
 
     plans = sorted((Path(__file__).resolve().parent.parent / "scripts" / "plans").glob("*.txt"))
     assert plans
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"), \
-            warnings.catch_warnings():
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # approximate groups warn (D8 on PointMass2D)
         plan_runs = [run for plan in plans for run in rq.read_plan(plan.read_text())]
         for run in plan_runs:  # seeds checked here, then set aside: the same checks
@@ -354,7 +352,7 @@ def test_every_plan_line_is_a_valid_run():
         runs = {(run.steps, *sorted(o for o in run.overrides if not o.startswith("seed=")))
                 for run in plan_runs}
         for steps, *overrides in sorted(runs):
-            cfg = compose("train", overrides=[*overrides, f"train.steps={steps}"])
+            cfg = compose_config([*overrides, f"train.steps={steps}"])
             check_task(RunOptions.from_config(OmegaConf.to_container(cfg, resolve=True)))
 
 

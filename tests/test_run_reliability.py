@@ -11,11 +11,11 @@ import imageio.v2 as imageio
 import numpy as np
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
 from test_train import config, rows
 
-from agents.cli.train import CONFIG_DIR, run, sweep_dirname, usable_cores
+from agents.cli.train import run, sweep_dirname, usable_cores
 from agents.run import checkpoint
+from agents.run.presets import compose_config
 
 pytestmark = pytest.mark.slow  # trains agents, kills and resumes them
 
@@ -181,8 +181,7 @@ def test_sweep_directories_stay_short_and_the_launcher_uses_one_process_per_core
     short = sweep_dirname(sweep)
     assert len(short) <= 120 and short.startswith("seed=3,") and ",icosahedral," in short
     assert all(f"value{i}" in short for i in range(6)) and short != sweep_dirname(sweep[:-1] + "4")
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = compose("train", return_hydra_config=True)
+    cfg = compose_config(hydra=True)
     assert cfg.hydra.launcher.n_jobs == usable_cores()
 
 

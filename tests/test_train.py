@@ -8,9 +8,9 @@ import sys
 import time
 
 import pytest
-from hydra import compose, initialize_config_dir
 
-from agents.cli.train import CONFIG_DIR, rewrite_env_shorthand, run
+from agents.cli.train import rewrite_env_shorthand, run
+from agents.run.presets import CONFIG_DIR, compose_config
 from agents.run.run_tables import rows_without_wall_clock
 
 # A run small enough for CI: 125-step episodes, one evaluation episode, a tiny agent.
@@ -25,8 +25,7 @@ TRAIN = [sys.executable, "-c", "from agents.cli.train import main; main()"]
 
 
 def config(*overrides):
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        return compose("train", overrides=[*TINY, *overrides])
+    return compose_config([*TINY, *overrides])
 
 
 rows = rows_without_wall_clock  # what a resumed run must share with an uninterrupted one
