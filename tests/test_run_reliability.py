@@ -13,9 +13,9 @@ import pytest
 import torch
 from test_train import config, rows
 
-from agents.cli.train import run, sweep_dirname, usable_cores
+from agents.cli.train import run
 from agents.run import checkpoint
-from agents.run.presets import compose_config
+from agents.run.presets import compose_config, sweep_dirname, usable_cores
 
 pytestmark = pytest.mark.slow  # trains agents, kills and resumes them
 

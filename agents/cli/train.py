@@ -16,8 +16,6 @@ checkpoint kept; a second signal stops at once).
 
 from __future__ import annotations
 
-import hashlib
-import os
 import signal
 import sys
 from collections.abc import Callable
@@ -47,37 +45,6 @@ from agents.run.run_dir import (
 from agents.run.run_log import RunLog
 from agents.run.run_tables import RunLogError
 from agents.run.trainer import StopRequest, Trainer, build_parts
-
-MAX_DIRNAME = 120
-
-
-# --- Hydra's directory names and resolvers ----------------------------------------
-def sweep_dirname(overrides: str) -> str:
-    """A multirun job's directory name: its overrides (``a.b=1,seed=2``), or, when that is
-    too long for the filesystem, the swept values kept readable: keys shortened to their
-    last part, then values only (but ``seed=``, which comes first), and a hash of the whole list so that
-    two jobs never share a directory."""
-    name = overrides.replace("/", "-") or "default"
-    if len(name) <= MAX_DIRNAME:
-        return name
-    digest = hashlib.sha1(name.encode()).hexdigest()[:8]
-    pairs = [item.partition("=") for item in name.split(",")]
-    pairs.sort(key=lambda p: p[0] != "seed")  # stable: seed first, the rest as Hydra sorted them
-    room = MAX_DIRNAME - len(digest) - 1
-    for short in (",".join(f"{k.rsplit('.', 1)[-1]}={v}" for k, _, v in pairs),
-                  ",".join(f"{k}={v}" if k == "seed" else v for k, _, v in pairs)):
-        if len(short) <= room:
-            return f"{short}_{digest}"
-    width = max(1, room // len(pairs) - 1)  # every value cut to the same width
-    return f"{','.join(v[:width] for _, _, v in pairs)[:room]}_{digest}"
-
-
-def usable_cores() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-
-
-OmegaConf.register_new_resolver("geomdp_dirname", sweep_dirname, replace=True)
-OmegaConf.register_new_resolver("geomdp_cores", usable_cores, replace=True)
 
 
 # --- signals -------------------------------------------------------------------------
