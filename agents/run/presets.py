@@ -26,9 +26,7 @@ def _config_dir() -> Path:
 
 
 CONFIG_DIR = _config_dir()
-
-
-MAX_DIRNAME = 120
+MAX_DIRNAME = 120  # a multirun job's directory name, at most
 
 
 # Hydra's directory names and resolvers (configs/train.yaml's ``hydra`` section uses them)
