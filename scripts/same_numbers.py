@@ -36,7 +36,7 @@ from run_queue import (  # noqa: E402
 )
 
 from agents.run.checkpoint_state import saved_step  # noqa: E402
-from agents.run.run_tables import differing_tables  # noqa: E402
+from agents.run.run_tables import added_columns, differing_tables  # noqa: E402
 
 # One of each kind of agent the experiments run: plain and a 2D group on PointMass2D, a
 # 3D group on PointMass3D, plain on Reacher hard (action repeat 4, its own schedules).
@@ -120,6 +120,9 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(f"| {name} | " + ("DIFFERENT: " + "; ".join(tables) if tables
                                        else "identical (eval.csv, train.csv)") + " |")
     print("\n".join(rows))
+    for name in configs:
+        for column in added_columns(runs[base, name], runs[head, name], (base[:10], head[:10])):
+            print(f"{name}: not compared, {column}")
     return 1 if any(differing.values()) else 0
 
 

@@ -48,7 +48,7 @@ from agents.run.results import (
     seed_order,
     varying_options,
 )
-from agents.run.run_tables import evaluation_share, wall_minutes
+from agents.run.run_tables import evaluation_share, last_value_check, wall_minutes
 from agents.run.statistics import (
     Spread,
     curve,
@@ -176,9 +176,12 @@ def contrast_table(groups: dict[str, list[Run]], contrasts: list[list[str]],
 def runs_table(groups: dict[str, list[Run]]) -> str:
     """One row per run: evaluation returns, wall time (and the share of it spent
     evaluating), Q half-way and at the end, the target network's lag late in training,
-    and which TD invariants fail."""
+    which TD invariants fail, and at the last evaluation Q at the episodes' first states
+    against the discounted returns earned from them, with their correlation (logs from
+    2026-12-06 on)."""
     rows = ["| group | seed | evaluation returns | wall time (min; evaluation share) | Q half-way → end "
-            "| target_lag, second half (end) | TD invariants |", "|---|---|---|---|---|---|---|"]
+            "| target_lag, second half (end) | TD invariants | last evaluation: Q(s₀) vs "
+            "discounted return (correlation) |", "|---|---|---|---|---|---|---|---|"]
     for label, runs in groups.items():
         for run in sorted(runs, key=lambda r: seed_order(r.options.get("seed"))):
             returns = " ".join(f"{r:.0f}" if abs(r) >= 10 or r == 0 else f"{r:.1f}" for r in run.returns)
@@ -196,7 +199,11 @@ def runs_table(groups: dict[str, list[Run]]) -> str:
                 cells = "– | – | no train.csv"
             except ValueError:
                 cells = "– | – | no update logged (q_mean, target_lag): not judged"
-            rows.append(f"| {label} | {run.options.get('seed')} | {returns} | {wall} | {cells} |")
+            check = last_value_check(run.path)
+            value = ("–" if check is None else f"{check['q_start']:.3g} vs "
+                     f"{check['discounted_return']:.3g} ({check['q_return_corr']:.2f})")
+            rows.append(f"| {label} | {run.options.get('seed')} | {returns} | {wall} | {cells} "
+                        f"| {value} |")
     return "\n".join(rows)
 
 

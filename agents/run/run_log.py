@@ -82,7 +82,7 @@ class RunLog:
 
     def __init__(self, run_dir: Path, tensorboard: str | bool = "auto") -> None:
         self.run_dir = run_dir
-        self.eval = CsvTable(run_dir / "eval.csv", EVAL_COLUMNS)
+        self.eval = CsvTable(run_dir / "eval.csv", EVAL_COLUMNS, grows=True)
         self.train = CsvTable(run_dir / "train.csv", TRAIN_COLUMNS)
         self.sessions = CsvTable(run_dir / "sessions.csv", SESSION_COLUMNS, grows=True)
         have_tb = importlib.util.find_spec("tensorboard") is not None

@@ -15,6 +15,14 @@ class RunLogError(ValueError):
     """A run directory's logs that this version cannot continue."""
 
 
+def read_header(path: Path) -> list[str] | None:
+    """A CSV file's header row (None: no file)."""
+    if not path.exists():
+        return None
+    with path.open(newline="") as f:
+        return next(csv.reader(f), [])
+
+
 class CsvTable:
     """Append-only CSV with a fixed header, flushed after every row. Constructing one
     writes nothing: the header is written with the first row. ``grows``: a file whose
@@ -31,10 +39,7 @@ class CsvTable:
 
     def header(self) -> list[str] | None:
         """The file's header row (None: no file yet)."""
-        if not self.path.exists():
-            return None
-        with self.path.open(newline="") as f:
-            return next(csv.reader(f), [])
+        return read_header(self.path)
 
     def append(self, row: dict[str, float]) -> None:
         if self.header() != self.columns:  # new, empty, or written with fewer columns
@@ -66,10 +71,14 @@ class CsvTable:
 
 
 # episode_reward: planner without exploration noise (TD-MPC's evaluation);
-# noisy_episode_reward: with the training noise at that step (the training episodes' setting).
+# noisy_episode_reward: with the training noise at that step (the training episodes' setting);
+# q_start, discounted_return, q_return_corr: Q at the noiseless episodes' first states against
+# the discounted returns they earned (td_invariants.value_at_start; logs before 2026-12-06
+# lack them).
 EVAL_COLUMNS = ["env_step", "agent_step", "episode", "wall_time", "episode_reward",
                 "episode_reward_std", "eval_episodes", "noisy_episode_reward",
-                "noisy_episode_reward_std", "noisy_eval_episodes"]
+                "noisy_episode_reward_std", "noisy_eval_episodes", "q_start",
+                "discounted_return", "q_return_corr"]
 # q_mean / td_target_mean: the TD learner's health (they grow toward the return scale);
 # target_lag: |online - target| / |online| over all parameters (the target must track).
 TRAIN_COLUMNS = ["env_step", "agent_step", "episode", "wall_time", "updates", "loss_model",
@@ -119,6 +128,19 @@ def evaluation_share(run_dir: Path) -> float | None:
     return max(0.0, 1 - training / (60 * total))
 
 
+def last_value_check(run_dir: Path) -> dict[str, float] | None:
+    """The last evaluation's ``q_start``, ``discounted_return`` and ``q_return_corr``
+    (``td_invariants.value_at_start``); None for logs without them."""
+    try:
+        with (run_dir / "eval.csv").open(newline="") as f:
+            rows = [r for r in csv.DictReader(f) if r.get("q_start")]
+    except OSError:
+        return None
+    if not rows:
+        return None
+    return {k: float(rows[-1][k]) for k in ("q_start", "discounted_return", "q_return_corr")}
+
+
 # Columns that measure the machine, not the run: two runs of the same code, seed and options
 # differ only there (on one machine; RESULTS.md, "What reproduces where").
 WALL_CLOCK_COLUMNS = ("wall_time", "steps_per_second")
@@ -132,13 +154,27 @@ def rows_without_wall_clock(path: Path) -> list[dict[str, str]]:
                 for row in csv.DictReader(f)]
 
 
+def added_columns(run_a: Path, run_b: Path, names: tuple[str, str] = ("a", "b")) -> list[str]:
+    """The columns of ``eval.csv`` and ``train.csv`` that only one of two runs writes (a
+    version that logs more), as ``eval.csv: q_start (only in b)``, a run named by ``names``."""
+    added = []
+    for table in ("eval.csv", "train.csv"):
+        a, b = (set(read_header(run_dir / table) or ()) for run_dir in (run_a, run_b))
+        added += [f"{table}: {column} (only in {name})"
+                  for name, only in zip(names, (a - b, b - a)) for column in sorted(only)]
+    return added
+
+
 def differing_tables(run_a: Path, run_b: Path) -> list[str]:
-    """Which of two run directories' ``eval.csv`` and ``train.csv`` differ in any column but
-    the wall-clock ones, each with where it first does (``train.csv: from env step 2000,
-    loss_model, q_mean``); empty when the runs are the same to the last digit."""
+    """Which of two run directories' ``eval.csv`` and ``train.csv`` differ in any column
+    both write but the wall-clock ones, each with where it first does (``train.csv: from
+    env step 2000, loss_model, q_mean``); empty when the runs are the same to the last
+    digit. A column only one writes is not compared (``added_columns`` names it)."""
     differing = []
     for table in ("eval.csv", "train.csv"):
         a, b = (rows_without_wall_clock(run_dir / table) for run_dir in (run_a, run_b))
+        shared = set(a[0] if a else ()) & set(b[0] if b else ())
+        a, b = ([{k: v for k, v in row.items() if k in shared} for row in rows] for rows in (a, b))
         if a == b:
             continue
         first = next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), None)

@@ -17,9 +17,12 @@ every finished run (``geomdp-plot --runs``):
 - with (almost) no reward in the whole run, Q stays near 0 (the fixed point of
   the TD backup on zero rewards) rather than drifting.
 
-A log cannot say whether Q is right where the agent actually goes; for that,
-``bootstrapped_returns`` gives the returns Q estimates along an episode played
-from a checkpoint (``examples/inspect_run.py`` prints the comparison).
+Whether Q is right where the agent actually goes is checked at every evaluation
+(``value_at_start``, columns of ``eval.csv``): Q(s₀, π(s₀)) at each noiseless evaluation
+episode's first state against the discounted return the episode then earned
+(``bootstrapped_returns``), and whether Q tells the episodes it solves from those it
+fails. ``examples/inspect_run.py`` prints the same along whole episodes played from a
+checkpoint.
 """
 
 from __future__ import annotations
@@ -71,6 +74,22 @@ def bootstrapped_returns(rewards: Sequence[float], discount: float,
         running = float(reward) + discount * running
         returns.append(running)
     return returns[::-1]
+
+
+def value_at_start(values: Sequence[float], returns: Sequence[float]) -> dict[str, float]:
+    """An evaluation's check of Q where the agent goes: over its episodes, the mean of
+    Q(s₀, π(s₀)) (``q_start``), the mean discounted return earned from s₀
+    (``discounted_return``), and their correlation across the episodes
+    (``q_return_corr``: does Q tell the episodes the agent solves from those it fails?
+    NaN with fewer than two episodes, or when either does not vary)."""
+    if len(values) != len(returns) or not values:
+        raise ValueError(f"one value per episode: {len(values)} values, {len(returns)} returns")
+    try:
+        corr = statistics.correlation(values, returns)
+    except statistics.StatisticsError:  # fewer than two points, or a constant
+        corr = math.nan
+    return {"q_start": statistics.fmean(values), "discounted_return": statistics.fmean(returns),
+            "q_return_corr": corr}
 
 
 def _floats(rows: list[dict[str, str]], column: str) -> list[float]:

@@ -30,6 +30,7 @@ from agents.run.envs import make_gym_env, torchrl_env
 from agents.run.progress import Progress
 from agents.run.run_dir import check_disk_space
 from agents.run.run_log import RunLog
+from agents.run.td_invariants import bootstrapped_returns, value_at_start
 from agents.run.video import frames_per_second, write_video
 from agents.tdmpc.agent import TDMPCAgent
 from agents.tdmpc.replay import make_replay_buffer, sample_slices, update_priorities
@@ -176,22 +177,24 @@ class Trainer:
         train = self.options.train
         episodes = train.eval_episodes + train.eval_noisy_episodes
 
-        def returns(n: int, explore: bool) -> list[float]:
+        def rollouts(n: int, explore: bool) -> list[TensorDictBase]:
             out = []
             for i in range(n):
                 if self.progress is not None:
                     self.progress.evaluating(i + (train.eval_episodes if explore else 0), episodes)
-                out.append(float(self.episode(self.eval_env, 10**6 + 1000 * self.options.seed + i,
-                                              explore=explore, random=False,
-                                              frames=frames if i == 0 and not explore else None,
-                                              phase="evaluation")["next", "reward"].sum()))
+                out.append(self.episode(self.eval_env, 10**6 + 1000 * self.options.seed + i,
+                                        explore=explore, random=False,
+                                        frames=frames if i == 0 and not explore else None,
+                                        phase="evaluation"))
             return out
 
-        plain = returns(self.options.train.eval_episodes, explore=False)
+        played = rollouts(self.options.train.eval_episodes, explore=False)
+        plain = [float(td["next", "reward"].sum()) for td in played]
         if frames:
             write_video(self.run_dir / "videos" / f"eval_{self.state['env_step']:08d}.mp4", frames,
                         frames_per_second(self.eval_gym_env, self.action_repeat))
-        noisy = returns(self.options.train.eval_noisy_episodes, explore=True)
+        noisy = [float(td["next", "reward"].sum())
+                 for td in rollouts(self.options.train.eval_noisy_episodes, explore=True)]
         self.state["last_eval_step"] = self.state["env_step"]
         self.state["last_eval_reward"] = float(np.mean(plain))
         self.log.log("eval", {
@@ -199,9 +202,25 @@ class Trainer:
             "episode_reward_std": np.std(plain), "eval_episodes": len(plain),
             "noisy_episode_reward": np.mean(noisy) if noisy else float("nan"),
             "noisy_episode_reward_std": np.std(noisy) if noisy else float("nan"),
-            "noisy_eval_episodes": len(noisy)})
+            "noisy_eval_episodes": len(noisy), **self.value_check(played)})
         if self.progress is not None:
             self.progress.evaluated(self.state["env_step"], self.state["last_eval_reward"])
+
+    def value_check(self, played: list[TensorDictBase]) -> dict[str, float]:
+        """Q(s₀, π(s₀)) against the discounted return each evaluation episode earned from
+        s₀, past a time limit valued at the agent's own Q as its TD targets do
+        (``td_invariants.value_at_start``). Computed after the episodes, from their
+        logs: it draws no random number and leaves the agent as it was."""
+        discount = self.agent.config.loss.discount
+        values, returns = [], []
+        for td in played:
+            first_last = torch.stack([td["observation"][0], td["next", "observation"][-1]])
+            q_start, q_last = self.agent.value(first_last).tolist()
+            terminated = bool(td["next", "terminated"][-1])
+            rewards = td["next", "reward"].reshape(-1).tolist()
+            values.append(q_start)
+            returns.append(bootstrapped_returns(rewards, discount, 0.0 if terminated else q_last)[0])
+        return value_at_start(values, returns)
 
     def _counters(self) -> dict[str, float]:
         return {k: self.state[k] for k in ("env_step", "agent_step", "episode", "wall_time")}
