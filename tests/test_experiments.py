@@ -13,7 +13,7 @@ from agents.cli import plot
 from agents.run import results, statistics
 from agents.run.presets import CONFIG_DIR, compose_config
 from agents.run.run_tables import evaluation_share, wall_minutes
-from agents.run.td_invariants import bootstrapped_returns, td_invariants
+from agents.run.td_invariants import bootstrapped_returns, td_invariants, value_at_start
 
 EXPERIMENTS = sorted(p.stem for p in (CONFIG_DIR / "experiment").glob("*.yaml"))
 
@@ -244,6 +244,21 @@ def test_bootstrapped_returns_are_what_q_estimates_along_an_episode():
     assert bootstrapped_returns([], 0.99, 7.0) == []
 
 
+def test_value_at_start_says_whether_q_tells_solved_episodes_from_failed_ones():
+    check = value_at_start([154.2, 211.6, 132.2, 172.1], [13.5, 370.8, 318.7, 232.3])
+    assert check["q_start"] == pytest.approx(167.525)
+    assert check["discounted_return"] == pytest.approx(233.825)
+    assert check["q_return_corr"] == pytest.approx(
+        stats.pearsonr([154.2, 211.6, 132.2, 172.1], [13.5, 370.8, 318.7, 232.3])[0])
+    assert value_at_start([2.0, 4.0], [3.0, 5.0])["q_return_corr"] == pytest.approx(1.0)
+    for values, returns in (([5.0], [7.0]), ([1.0, 1.0], [2.0, 3.0]), ([1.0, 2.0], [0.0, 0.0])):
+        check = value_at_start(values, returns)  # one episode, or a Q or a return that does not vary
+        assert np.isnan(check["q_return_corr"]) and np.isfinite(check["q_start"])
+    for values, returns in (([], []), ([1.0], [1.0, 2.0])):
+        with pytest.raises(ValueError, match="one value per episode"):
+            value_at_start(values, returns)
+
+
 def test_td_invariants_name_each_way_value_learning_breaks(tmp_path):
     n = 20
     # the lag spikes after initialisation and when the reward is first found, then settles
@@ -294,6 +309,10 @@ def test_plot_lists_runs_with_their_td_invariants(tmp_path, capsys):
     write_run(tmp_path / "none/1", "none", 1, [0, 5.5, 7])
     write_train_log(tmp_path / "none/1", q=[1.0, 2.0, 3.0, 4.0], lag=[0.5] * 4,
                     reward=[0, 10, 20, 30, 40])
+    # the value check of the last evaluation (eval.csv from 2026-12-06 on); the earlier row's is not shown
+    (tmp_path / "D8/1/eval.csv").write_text(
+        "env_step,episode_reward,q_start,discounted_return,q_return_corr\n0,0,0.0,1.5,nan\n"
+        "1000,900,1.0,2.0,0.5\n2000,950,255.7,368.04,-0.1234\n")
     write_run(tmp_path / "none/2", "none", 2, [0, 0, 0])  # no train.csv (e.g. copied evals only)
     write_run(tmp_path / "none/10", "none", 10, [0, 0, 0])  # a log from before q_mean was logged
     (tmp_path / "none/10/train.csv").write_text("env_step,wall_time,episode_reward\n1000,1.0,0\n")
@@ -303,11 +322,14 @@ def test_plot_lists_runs_with_their_td_invariants(tmp_path, capsys):
     rows = {tuple(cell.strip() for cell in line.split("|")[1:3]): line for line in lines}
     assert list(rows) == [("group=D8", "1"), ("group=none", "1"), ("group=none", "2"),
                           ("group=none", "10")]  # seeds in numeric order
-    assert "| 0 900 950 | 5 | 1 → 150 | 0.020–0.020 (0.020) | hold |" in rows["group=D8", "1"]
+    assert rows["group=D8", "1"].endswith(
+        "| 0 900 950 | 5 | 1 → 150 | 0.020–0.020 (0.020) | hold | 256 vs 368 (-0.12) |")
     assert "| 0 5.5 7.0 | 5 |" in rows["group=none", "1"]
     assert "FAIL: target_lag ends at 0.500" in rows["group=none", "1"]
-    assert rows["group=none", "2"].endswith("| – | – | – | no train.csv |")
-    assert rows["group=none", "10"].endswith("| – | – | no update logged (q_mean, target_lag): not judged |")
+    assert rows["group=none", "1"].endswith(" | – |")  # an eval.csv from before the value check
+    assert rows["group=none", "2"].endswith("| – | – | – | no train.csv | – |")
+    assert rows["group=none", "10"].endswith(
+        "| – | – | no update logged (q_mean, target_lag): not judged | – |")
 
 
 def test_evaluation_share_is_the_wall_time_not_spent_training(tmp_path, capsys):

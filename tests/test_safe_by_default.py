@@ -18,7 +18,7 @@ from test_train import TINY, config
 from agents.cli.train import run
 from agents.options import OptionError
 from agents.run.run_log import RunLog
-from agents.run.run_tables import SESSION_COLUMNS, CsvTable
+from agents.run.run_tables import EVAL_COLUMNS, SESSION_COLUMNS, CsvTable
 from agents.tdmpc.agent import TDMPCConfig
 from geomdp_envs.declare import load_declaration
 
@@ -149,6 +149,16 @@ def test_sessions_written_by_an_older_version_gain_the_new_columns(tmp_path):
     (tmp_path / "other.csv").write_text("a,b\n")
     with pytest.raises(ValueError, match="other columns"):
         CsvTable(tmp_path / "other.csv", SESSION_COLUMNS, grows=True)
+
+
+def test_an_eval_csv_from_before_the_value_check_is_continued_with_its_columns(tmp_path):
+    old_columns = EVAL_COLUMNS[:EVAL_COLUMNS.index("q_start")]
+    (tmp_path / "eval.csv").write_text(",".join(old_columns) + "\n0,0,0,0.0,5.0,1.0,10,4.0,1.0,3\n")
+    log = RunLog(tmp_path, tensorboard=False)
+    log.eval.append({"env_step": 5000, "episode_reward": 7.0, "q_start": 2.5})
+    old, new = rows(tmp_path / "eval.csv")
+    assert list(old) == EVAL_COLUMNS and old["episode_reward"] == "5.0" and old["q_start"] == ""
+    assert new["q_start"] == "2.5"
 
 
 # --- signals from the first moment, and the messages of an interrupted run ------------------

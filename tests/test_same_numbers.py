@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.run.run_tables import differing_tables
+from agents.run.run_tables import added_columns, differing_tables
 
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 
@@ -38,6 +38,20 @@ def test_runs_equal_but_for_the_clock_are_identical_and_any_other_digit_is_named
         "train.csv: from env step 2000, loss_model"]
     write_tables(tmp_path / "d", ["0.125", "0.0999991"], ["10.0", "20.0"], evals=3)
     assert differing_tables(tmp_path / "a", tmp_path / "d") == ["eval.csv: 2 rows against 3"]
+
+
+def test_a_column_only_one_commit_logs_is_named_not_compared(tmp_path):
+    write_tables(tmp_path / "old", ["0.125", "0.0999991"], ["10.0", "20.0"])
+    write_tables(tmp_path / "new", ["0.125", "0.0999991"], ["10.0", "20.0"])
+    eval_csv = tmp_path / "new/eval.csv"
+    lines = eval_csv.read_text().splitlines()
+    eval_csv.write_text("\n".join([lines[0] + ",q_start"] + [f"{x},1.5" for x in lines[1:]]) + "\n")
+    assert differing_tables(tmp_path / "old", tmp_path / "new") == []
+    assert added_columns(tmp_path / "old", tmp_path / "new", ("2729c50", "621c290")) == [
+        "eval.csv: q_start (only in 621c290)"]
+    eval_csv.write_text(eval_csv.read_text().replace("12.5,1.5", "12.6,1.5", 1))  # a shared column
+    assert differing_tables(tmp_path / "old", tmp_path / "new") == [
+        "eval.csv: from env step 0, episode_reward"]
 
 
 def test_configs_are_name_equals_overrides():

@@ -6,12 +6,19 @@ import signal
 import subprocess
 import sys
 import time
+from types import SimpleNamespace
 
+import gymnasium
 import pytest
+import torch
+from tensordict import TensorDict
 
+import geomdp_envs  # noqa: F401  (registers GeoMDP/*)
+from agents import TDMPCAgent, agent_config
 from agents.cli.train import rewrite_env_shorthand, run
 from agents.run.presets import CONFIG_DIR, compose_config
 from agents.run.run_tables import rows_without_wall_clock
+from agents.run.trainer import Trainer
 
 # A run small enough for CI: 125-step episodes, one evaluation episode, a tiny agent.
 TINY = ["env.action_repeat=8", "train.steps=2000", "train.seed_steps=1000",
@@ -41,6 +48,9 @@ def test_smoke_run_writes_everything(tmp_path):
     assert [int(r["env_step"]) for r in evals] == [0, 1000, 2000]
     assert evals[-1]["eval_episodes"] == "1" and evals[-1]["noisy_eval_episodes"] == "1"
     assert evals[-1]["noisy_episode_reward"] != ""
+    assert float(evals[0]["q_start"]) == 0.0  # the Q heads' last layers start at zero
+    assert float(evals[-1]["q_start"]) != 0.0 and float(evals[-1]["discounted_return"]) >= 0
+    assert evals[-1]["q_return_corr"] == "nan"  # one episode: no correlation to measure
     train = rows(tmp_path / "train.csv")
     assert train[-1]["updates"] == "125" and float(train[-1]["loss_model"]) > 0
     assert 0 < float(train[-1]["target_lag"]) < 1 and train[-1]["q_mean"] != ""
@@ -50,6 +60,52 @@ def test_smoke_run_writes_everything(tmp_path):
                           text=True, check=False).stdout.strip()
     assert session["git_commit"] == (head or "unknown") and session["env_step"] == "0"
     assert session["git_dirty"] in ("True", "False", "unknown") and session["torch"] != "absent"
+
+
+def played_episode(first_coordinates: list[float], rewards: list[float], terminated: bool):
+    """A rollout's TensorDict: observations whose first coordinate is the given one."""
+    obs = torch.zeros(len(first_coordinates), 4)
+    obs[:, 0] = torch.tensor(first_coordinates)
+    n = len(rewards)
+    done = torch.zeros(n, 1, dtype=torch.bool)
+    done[-1] = terminated
+    return TensorDict({"observation": obs[:-1], "next": {
+        "observation": obs[1:], "reward": torch.tensor(rewards).reshape(n, 1), "terminated": done}},
+        batch_size=[n])
+
+
+def test_value_check_bootstraps_past_the_time_limit_only_and_leaves_the_agent_as_it_was():
+    # arithmetic: Q is the observation's first coordinate, discount 0.5
+    fake = SimpleNamespace(agent=SimpleNamespace(
+        config=SimpleNamespace(loss=SimpleNamespace(discount=0.5)),
+        value=lambda obs: obs[..., 0]))
+    time_limit = played_episode([10.0, 0.0, 0.0, 8.0], [1.0, 0.0, 2.0], terminated=False)
+    terminated = played_episode([4.0, 0.0, 0.0, 100.0], [1.0, 0.0, 2.0], terminated=True)
+    # 1 + 0.5 (0 + 0.5 (2 + 0.5 * 8)) = 2.5; terminated: the last state is worth 0, so 1.5
+    check = Trainer.value_check(fake, [time_limit, terminated])
+    assert check["q_start"] == 7.0 and check["discounted_return"] == 2.0
+    assert check["q_return_corr"] == pytest.approx(1.0)
+    # a real agent (plain and equivariant): no random number drawn, no parameter moved
+    env = gymnasium.make("GeoMDP/PointMass2D-v0")
+    symmetry = env.unwrapped.symmetry
+    for group in ("none", "D4"):
+        agent = TDMPCAgent(agent_config("tdmpc", f"group={group}", "networks.hidden_dim=16",
+                                        "networks.latent_dim=8"),
+                           symmetry, symmetry.observation_size, symmetry.action_size, seed=3)
+        real = SimpleNamespace(agent=agent)
+        before = (agent.generator.get_state(), torch.get_rng_state(),
+                  [p.clone() for p in agent.model.parameters()])
+        episode = played_episode([0.1, 0.2, -0.1], [0.5, 0.25], terminated=False)
+        episode["observation"][:, 1] = 0.05
+        check = Trainer.value_check(real, [episode])
+        q_first = float(agent.value(episode["observation"][0]))
+        q_last = float(agent.value(episode["next", "observation"][-1]))
+        assert check["q_start"] == pytest.approx(q_first, abs=1e-6)
+        assert check["discounted_return"] == pytest.approx(
+            0.5 + 0.99 * (0.25 + 0.99 * q_last), abs=1e-5)
+        assert torch.equal(agent.generator.get_state(), before[0])
+        assert torch.equal(torch.get_rng_state(), before[1])
+        assert all(torch.equal(p, q) for p, q in zip(agent.model.parameters(), before[2]))
 
 
 @pytest.mark.slow
