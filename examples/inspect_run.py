@@ -10,7 +10,10 @@ Q(s, pi(s)) at the first state, and averaged over the episode's states, beside
 the discounted return from there (``bootstrapped_returns``: rewards per agent
 step, the state after the time limit valued at the agent's own Q, as its TD
 targets do). A Q far above the return where the episode earned nothing is
-value overestimation, not a model the planner could trust. ``--video`` writes
+value overestimation, not a model the planner could trust. Then what the
+agent's reward model predicts for the episode's states and actions against the
+rewards earned: reward the model sees where there is none points at the model,
+an optimistic Q with a truthful reward model at the value. ``--video`` writes
 the first episode as an MP4 (rendered headless).
 """
 
@@ -23,6 +26,7 @@ import numpy as np
 import torch
 from omegaconf import OmegaConf
 
+from agents.nn.expansion import expansion_scope
 from agents.run import checkpoint
 from agents.run.config import RunOptions
 from agents.run.envs import make_gym_env
@@ -31,6 +35,17 @@ from agents.run.video import frames_per_second, write_video
 from agents.tdmpc.agent import TDMPCAgent
 from agents.tdmpc.replay import make_replay_buffer
 from geomdp_envs import symmetry_of
+
+
+@torch.no_grad()
+def predicted_rewards(agent: TDMPCAgent, observations: torch.Tensor,
+                      actions: torch.Tensor) -> np.ndarray:
+    """The agent's reward model at each agent step of a played episode (per agent step,
+    action repeats summed, as its replay stores rewards)."""
+    model = agent.model
+    with expansion_scope(model):
+        z = model.encode(observations.to(agent.device, torch.float32))
+        return model.reward(z, actions.to(agent.device, torch.float32)).reshape(-1).cpu().numpy()
 
 
 def main() -> None:
@@ -58,7 +73,7 @@ def main() -> None:
     for episode in range(args.episodes):
         obs, _ = env.reset(seed=args.seed + episode)
         start, done, terminated = obs[:2].copy(), False, False
-        values, rewards = [], []  # per agent step
+        values, rewards, observations, actions = [], [], [], []  # per agent step
         frames = [] if args.video and episode == 0 else None
         agent.start_episode()
         while not done:
@@ -68,6 +83,8 @@ def main() -> None:
             values.append(float(agent.value(obs_t)))
             action = (agent.policy_action(obs_t) if args.policy
                       else agent.act(obs_t, state["agent_step"], explore=False)).numpy()
+            observations.append(obs_t)
+            actions.append(torch.as_tensor(action))
             rewards.append(0.0)
             for _ in range(options.env.action_repeat):
                 obs, reward, terminated, truncated, _ = env.step(action)
@@ -80,6 +97,10 @@ def main() -> None:
         print(f"episode {episode}: start {np.round(start, 3)} end {np.round(obs[:2], 3)} "
               f"return {sum(rewards):.1f}; Q(s_0, pi) {values[0]:.1f} vs discounted return "
               f"{returns[0]:.1f}, mean over the episode {np.mean(values):.1f} vs {np.mean(returns):.1f}")
+        predicted = predicted_rewards(agent, torch.stack(observations), torch.stack(actions))
+        print(f"  reward model: {predicted.sum():.1f} predicted over the episode vs "
+              f"{sum(rewards):.1f} earned; at the steps that earned nothing "
+              f"{predicted[np.array(rewards) == 0].sum():.1f}")
         if frames is not None:
             frames.append(env.render())
             fps = frames_per_second(env, options.env.action_repeat)

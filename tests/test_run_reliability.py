@@ -167,6 +167,9 @@ def test_evaluation_video_is_written_and_playable(tmp_path):
         values = re.search(r"Q\(s_0, pi\) (\S+) vs discounted return (\S+), mean over the "
                            r"episode (\S+) vs (\S+)$", printed, re.MULTILINE)
         assert values and all(np.isfinite(float(v)) for v in values.groups()), printed
+        rewards = re.search(r"reward model: (\S+) predicted over the episode vs (\S+) earned; "
+                            r"at the steps that earned nothing (\S+)$", printed, re.MULTILINE)
+        assert rewards and all(np.isfinite(float(v)) for v in rewards.groups()), printed
 
 
 def test_sweep_directories_stay_short_and_the_launcher_uses_one_process_per_core():
