@@ -1,6 +1,7 @@
 """geomdp-train: smoke run, determinism, resume, and bad input."""
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -49,7 +50,8 @@ def test_smoke_run_writes_everything(tmp_path):
     assert evals[-1]["eval_episodes"] == "1" and evals[-1]["noisy_eval_episodes"] == "1"
     assert evals[-1]["noisy_episode_reward"] != ""
     assert float(evals[0]["q_start"]) == 0.0  # the Q heads' last layers start at zero
-    assert float(evals[-1]["q_start"]) != 0.0 and float(evals[-1]["discounted_return"]) >= 0
+    # learned by now; the return is bootstrapped at the time limit by Q (of either sign early on)
+    assert float(evals[-1]["q_start"]) != 0.0 and math.isfinite(float(evals[-1]["discounted_return"]))
     assert evals[-1]["q_return_corr"] == "nan"  # one episode: no correlation to measure
     train = rows(tmp_path / "train.csv")
     assert train[-1]["updates"] == "125" and float(train[-1]["loss_model"]) > 0
