@@ -26,7 +26,6 @@ import numpy as np
 import torch
 from omegaconf import OmegaConf
 
-from agents.nn.expansion import expansion_scope
 from agents.run import checkpoint
 from agents.run.config import RunOptions
 from agents.run.envs import make_gym_env
@@ -35,17 +34,6 @@ from agents.run.video import frames_per_second, write_video
 from agents.tdmpc.agent import TDMPCAgent
 from agents.tdmpc.replay import make_replay_buffer
 from geomdp_envs import symmetry_of
-
-
-@torch.no_grad()
-def predicted_rewards(agent: TDMPCAgent, observations: torch.Tensor,
-                      actions: torch.Tensor) -> np.ndarray:
-    """The agent's reward model at each agent step of a played episode (per agent step,
-    action repeats summed, as its replay stores rewards)."""
-    model = agent.model
-    with expansion_scope(model):
-        z = model.encode(observations.to(agent.device, torch.float32))
-        return model.reward(z, actions.to(agent.device, torch.float32)).reshape(-1).cpu().numpy()
 
 
 def main() -> None:
@@ -97,7 +85,7 @@ def main() -> None:
         print(f"episode {episode}: start {np.round(start, 3)} end {np.round(obs[:2], 3)} "
               f"return {sum(rewards):.1f}; Q(s_0, pi) {values[0]:.1f} vs discounted return "
               f"{returns[0]:.1f}, mean over the episode {np.mean(values):.1f} vs {np.mean(returns):.1f}")
-        predicted = predicted_rewards(agent, torch.stack(observations), torch.stack(actions))
+        predicted = agent.predicted_reward(torch.stack(observations), torch.stack(actions)).cpu().numpy()
         print(f"  reward model: {predicted.sum():.1f} predicted over the episode vs "
               f"{sum(rewards):.1f} earned; at the steps that earned nothing "
               f"{predicted[np.array(rewards) == 0].sum():.1f}")

@@ -118,8 +118,8 @@ def test_plain_planner_is_not_equivariant(make_agent):
 @EQUIVARIANT_CASES
 def test_value_is_invariant_and_policy_action_equivariant(env_id, kwargs, group, element,
                                                          make_agent):
-    """What inspect_run compares with the returns: V(g.s) = V(s), pi(g.s) = g.pi(s); and V
-    is the TD targets' min_i Q_i(z, pi(z))."""
+    """What inspect_run compares with the returns: V(g.s) = V(s), pi(g.s) = g.pi(s), the
+    predicted reward R(g.s, g.a) = R(s, a); and V is the TD targets' min_i Q_i(z, pi(z))."""
     env, sym, agent = make_agent(env_id, kwargs, group)
     g = _element(agent, element)
     obs = torch.as_tensor(np.stack([env.reset(seed=s)[0] for s in (0, 1, 2)]), dtype=torch.float64)
@@ -136,6 +136,14 @@ def test_value_is_invariant_and_policy_action_equivariant(env_id, kwargs, group,
     assert q.shape[0] == agent.config.networks.num_q
     np.testing.assert_allclose(value.numpy(), q.min(dim=0).values.squeeze(-1).detach().numpy())
     assert (q.max(dim=0).values.squeeze(-1).detach() - value).abs().max() > 1e-6  # the min, not any
+    # and the reward model inspect_run compares with the rewards: R(g.s, g.a) = R(s, a)
+    reward = agent.predicted_reward(obs, action)
+    assert reward.shape == (3,) and reward.abs().max() > 1e-6  # randomised heads: not the zero init
+    moved_action = torch.as_tensor(sym.transform_action(action.numpy(), g))
+    np.testing.assert_allclose(agent.predicted_reward(moved, moved_action).numpy(), reward.numpy(),
+                               atol=1e-8)
+    np.testing.assert_allclose(reward.numpy(),
+                               agent.model.reward(z, action).squeeze(-1).detach().numpy())
 
 
 def test_plain_value_is_not_invariant(make_agent):

@@ -186,6 +186,14 @@ class TDMPCAgent:
             z = self.model.encode(self._as_model_input(obs))
             return self.model.min_q(z, self.model.pi(z)).squeeze(-1)
 
+    @torch.no_grad()
+    def predicted_reward(self, obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """The reward model's prediction for taking ``action`` at ``obs`` (per agent step,
+        action repeats summed, as replay stores rewards; ``[...]`` for ``obs [..., n]``)."""
+        with expansion_scope(self.model):
+            z = self.model.encode(self._as_model_input(obs))
+            return self.model.reward(z, self._as_model_input(action)).squeeze(-1)
+
     def update(self, batch: TensorDictBase) -> tuple[dict[str, float], torch.Tensor]:
         """One gradient step on a [batch, horizon] TensorDict. Returns the losses and
         health metrics, and each slice's new replay priority (TD-MPC's TD error). With
