@@ -26,8 +26,14 @@ a comment. The same plan given again skips finished runs and resumes the others:
 
     python scripts/run_queue.py scripts/plans/headline.txt --commit 9623621 \\
         --deadline 20:45 --estimate 'results/reacher_hard_cpu/*=45'
-    python scripts/run_queue.py scripts/plans/baseline_fidelity_paper.txt \
+    python scripts/run_queue.py scripts/plans/baseline_fidelity_paper.txt \\
         --commit 1234abc --deadline 19:00 --parallel 1 --carry-over 'results/fidelity/*'
+
+Several plans make one queue, in the order given (a slot's schedule in one command)::
+
+    python scripts/run_queue.py scripts/plans/warmup.txt scripts/plans/n_balls.txt \\
+        --commit a910cab --deadline 19:00 --parallel 1 \\
+        --estimate 'results/warmup/*=40' --estimate 'results/n_balls/*=90'
 
 ``--dry-run`` prints what would start now, and touches nothing (not even the worktree).
 """
@@ -96,6 +102,25 @@ def read_plan(text: str) -> list[Run]:
             raise PlanError(f"plan line {number}: {dest} is listed twice")
         seen.add(dest)
         runs.append(Run(dest, int(words[1]), words[2:]))
+    return runs
+
+
+def read_plans(plans: list[tuple[str, str]]) -> list[Run]:
+    """Several plans (name, text) as one queue, in the order given: a slot's whole
+    schedule is one command, and a run of a later plan fills time no run of an earlier
+    one fits in."""
+    runs: list[Run] = []
+    source: dict[str, str] = {}
+    for name, text in plans:
+        try:
+            plan_runs = read_plan(text)
+        except PlanError as err:
+            raise PlanError(f"{name}: {err}") from None
+        for run in plan_runs:
+            if run.dest in source:
+                raise PlanError(f"{name}: {run.dest} is also in {source[run.dest]}")
+            source[run.dest] = name
+        runs += plan_runs
     return runs
 
 
@@ -539,7 +564,8 @@ class Queue:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("plan", help="plan file ('-': stdin)")
+    parser.add_argument("plans", nargs="+", metavar="plan",
+                        help="plan files, run in the order given ('-': stdin)")
     parser.add_argument("--commit", required=True, help="the commit every run is trained with")
     parser.add_argument("--deadline", required=True, help="HH:MM, +90m, +2h or an ISO time")
     parser.add_argument("--worktree", type=Path, help="default: ../queue-<commit> beside the checkout")
@@ -559,8 +585,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--dry-run", action="store_true")
     args = parser.parse_args(argv)
     try:
-        text = sys.stdin.read() if args.plan == "-" else Path(args.plan).read_text()
-        runs = read_plan(text)
+        runs = read_plans([(name, sys.stdin.read() if name == "-" else Path(name).read_text())
+                           for name in args.plans])
         commit, worktree = pinned_worktree(REPO, args.commit, args.worktree, create=not args.dry_run)
         queue = Queue(runs, REPO, commit, worktree, parse_deadline(args.deadline, dt.datetime.now()),
                       args.parallel, parse_estimates(args.estimate), args.default_minutes,

@@ -98,6 +98,13 @@ def test_plan_lines_are_checked() -> None:
                       ("r/a 1\nr/a 2", "listed twice")]:
         with pytest.raises(rq.PlanError, match=says):
             rq.read_plan(bad)
+    # several plans: one queue in the order given; a run in two plans, or a bad line, named
+    runs = rq.read_plans([("p1", "r/b 1\nr/a 1"), ("p2", "r/c 2")])
+    assert [r.dest for r in runs] == ["r/b", "r/a", "r/c"]
+    for plans, says in [([("p1", "r/a 1"), ("p2", "r/b 1\nr/a 2")], "p2: r/a is also in p1"),
+                        ([("p1", "r/a 1"), ("p2", "r/b x")], "p2: plan line 1")]:
+        with pytest.raises(rq.PlanError, match=says):
+            rq.read_plans(plans)
     with pytest.raises(rq.PlanError, match="PATTERN=MINUTES"):
         rq.parse_estimates(["results/a=soon"])
     now = dt.datetime(2026, 1, 1, 12, 0)
@@ -367,6 +374,12 @@ def test_dry_run_prints_the_plan_and_makes_no_worktree(repo: Path, monkeypatch, 
     assert "5 min fits  results/x/a/seed1" in out and "fake_train seed=1 train.steps=100" in out
     assert "(in 1.0 h)" in out  # how far the deadline is: an HH:MM read as tomorrow shows
     assert not worktree.exists() and "not-made" not in git(repo, "worktree", "list")
+    second = repo / "plan2.txt"  # a second plan queues after the first
+    second.write_text("results/y/a/seed1 100 seed=2\n")
+    assert rq.main([str(plan), str(second), "--commit", "HEAD", "--deadline", "+1h",
+                    "--worktree", str(worktree), "--module", "fake_train", "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "queue: 2 runs" in out and out.index("results/x/a/seed1") < out.index("results/y/a/seed1")
 
 
 def test_an_adopted_carried_run_is_committed_with_its_checkpoint(repo: Path, capsys,
