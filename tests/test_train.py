@@ -118,15 +118,48 @@ def test_same_seed_gives_the_same_eval_csv(tmp_path):
     assert rows(tmp_path / "a/train.csv") == rows(tmp_path / "b/train.csv")
 
 
+def train_and_evaluations(run_dir, at_step: int) -> tuple[list[dict], list[dict]]:
+    """A run's train rows, and its eval rows at ``at_step`` without the columns that
+    depend on how many noisy episodes were played."""
+    evals = [{k: v for k, v in r.items() if not k.startswith("noisy_")}
+             for r in rows(run_dir / "eval.csv") if int(r["env_step"]) == at_step]
+    return rows(run_dir / "train.csv"), evals
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("group", ["none", "D8"])
+def test_separate_evaluation_noise_leaves_training_untouched(tmp_path, group):
+    """``train.eval_noise=separate``: evaluating every 1000 steps with no noisy episode, or
+    every 2000 with one, gives the same training run and the same evaluation at 2000 (its
+    generator is a function of seed and step); ``shared`` (the default) does not, since its
+    evaluations draw from the agent's generator (the evaluation at step 0 moves the warm-up)."""
+    settings = {"often": ["train.eval_every=1000", "train.eval_noisy_episodes=0"],
+                "rarely": ["train.eval_every=2000", "train.eval_noisy_episodes=1"]}
+    noises = ["separate", "shared"] if group == "none" else ["separate"]
+    made = {}
+    for noise in noises:
+        for name, overrides in settings.items():
+            run_dir = tmp_path / f"{noise}-{name}"
+            assert run(config(f"agent.group={group}", f"train.eval_noise={noise}", *overrides),
+                       run_dir) == 0
+            made[noise, name] = train_and_evaluations(run_dir, at_step=2000)
+    assert made["separate", "often"] == made["separate", "rarely"]
+    assert len(made["separate", "often"][1]) == 1
+    if "shared" in noises:
+        assert made["shared", "often"][0] != made["shared", "rarely"][0]
+
+
 AGENTS = {"plain": [], "D8": ["agent.group=D8"],
           "octahedral-pointmass3d": ["env=pointmass3d", "agent.group=octahedral"],
           "SO3-pointmass3d": ["env=pointmass3d", "agent.group=SO3"],
           "O2-reacher": ["env=reacher", "agent.group=O2"],
-          "plain-augmented": ["agent.augment=auto"]}
+          "plain-augmented": ["agent.augment=auto"],
+          "D8-separate-evaluation": ["agent.group=D8", "train.eval_noise=separate"]}
 KILLS = [("plain", "seeding:100"), ("plain", "evaluation:200"), ("plain", "checkpoint_write:1"),
          ("plain", "checkpoint_cleanup:2"), ("D8", "update:100"), ("D8", "checkpoint_swap:1"),
          ("octahedral-pointmass3d", "update:60"), ("SO3-pointmass3d", "update:60"),
-         ("O2-reacher", "checkpoint_swap:1"), ("plain-augmented", "update:100")]
+         ("O2-reacher", "checkpoint_swap:1"), ("plain-augmented", "update:100"),
+         ("D8-separate-evaluation", "evaluation:200")]
 
 
 @pytest.fixture(scope="module")

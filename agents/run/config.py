@@ -61,6 +61,9 @@ def fixed_options(flat: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in flat.items() if not k.startswith(RESUMABLE_KEYS)}
 
 
+EVAL_NOISES = ("shared", "separate")
+
+
 @dataclass
 class TrainOptions:
     """The training loop's budgets and schedule (``train.*``)."""
@@ -72,6 +75,11 @@ class TrainOptions:
     eval_every: int = option(5000, low=1)        # env steps between evaluations (and one at 0)
     eval_episodes: int = option(10, low=1)
     eval_noisy_episodes: int = option(3, low=0)  # the same start states with training noise
+    # where evaluation's planner noise comes from: "shared", the agent's generator (as TD-MPC,
+    # and every committed run: evaluation settings then change the training trajectory, as
+    # another seed would), or "separate", a generator per evaluation seeded by (seed, env
+    # step): training then does not depend on when or how much the run is evaluated
+    eval_noise: str = option("shared", choices=EVAL_NOISES)
     threads: int = option(1, low=1)              # torch threads
     progress: bool = True
     # env steps between checkpoints (at episode ends; in a block of updates: that many steps' worth)

@@ -24,7 +24,8 @@ ADDED_LATER = {"agent.augment": "none", "env.symmetry": None,
                "agent.networks.encoder_layers": None, "agent.networks.encoder_dim": None,
                "agent.networks.layer_norm": "every", "agent.networks.init": "default",
                "agent.loss.straight_through": False,
-               "agent.replay.max_priority_within_buffer": False}
+               "agent.replay.max_priority_within_buffer": False,
+               "train.eval_noise": "shared"}
 
 
 def with_added_later(flat: dict[str, Any]) -> dict[str, Any]:

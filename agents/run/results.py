@@ -20,6 +20,7 @@ from agents.run.nested import flatten, with_added_later
 
 IGNORED_KEYS = ("seed", "train.progress", "train.threads", "logger", "device",
                 "train.eval_every", "train.eval_episodes", "train.eval_noisy_episodes",
+                "train.eval_noise",
                 "train.checkpoint_every", "train.video")
 
 

@@ -33,11 +33,21 @@ from agents.run.run_log import RunLog
 from agents.run.td_invariants import bootstrapped_returns, value_at_start
 from agents.run.video import frames_per_second, write_video
 from agents.tdmpc.agent import TDMPCAgent
+from agents.tdmpc.planner import NoiseSource
 from agents.tdmpc.replay import make_replay_buffer, sample_slices, update_priorities
 from geomdp_envs.mujoco_env import load_triton_before_mesa
 
 REPLAY_KEYS = ("observation", "action", "episode", ("next", "observation"),
                ("next", "reward"), ("next", "terminated"))
+EVALUATION_NOISE_KEY = 2_000_003  # keeps evaluation's generators apart from any other seed's
+
+
+def evaluation_noise(seed: int, env_step: int) -> NoiseSource:
+    """The planner noise of the evaluation at ``env_step`` under ``train.eval_noise=separate``:
+    a generator of its own, a function of (seed, env step) only, so that evaluating draws
+    nothing from the agent's generator and a resumed run evaluates as an uninterrupted one."""
+    entropy = np.random.SeedSequence([EVALUATION_NOISE_KEY, seed, env_step])
+    return NoiseSource(torch.Generator().manual_seed(int(entropy.generate_state(1, np.uint64)[0])))
 
 
 class StopRequest:
@@ -132,9 +142,10 @@ class Trainer:
 
     # acting
     def policy(self, explore: bool, random: bool, frames: list[np.ndarray] | None = None,
-               phase: str = "acting") -> TensorDictModule:
-        """The acting policy for one episode: random warm-up actions, or the planner;
-        with ``frames``, the eval env is rendered before every action."""
+               phase: str = "acting", noise: NoiseSource | None = None) -> TensorDictModule:
+        """The acting policy for one episode: random warm-up actions, or the planner (its
+        noise from ``noise``, default the agent's generator); with ``frames``, the eval env
+        is rendered before every action."""
         step = [self.state["agent_step"]]
         phase = "seeding" if random else phase
 
@@ -146,7 +157,7 @@ class Trainer:
             if random:
                 action = self.agent.random_action()
             else:
-                action = self.agent.act(observation, step[0], explore=explore)
+                action = self.agent.act(observation, step[0], explore=explore, noise=noise)
             step[0] += 1
             if self.progress is not None and phase != "evaluation":
                 self.progress.advance(self.action_repeat)
@@ -155,10 +166,11 @@ class Trainer:
         return TensorDictModule(act, in_keys=["observation"], out_keys=["action"])
 
     def episode(self, env: TransformedEnv, seed: int, explore: bool, random: bool,
-                frames: list[np.ndarray] | None = None, phase: str = "acting") -> TensorDictBase:
+                frames: list[np.ndarray] | None = None, phase: str = "acting",
+                noise: NoiseSource | None = None) -> TensorDictBase:
         self.agent.start_episode()
         env.set_seed(seed)
-        td = env.rollout(max_steps=10**9, policy=self.policy(explore, random, frames, phase),
+        td = env.rollout(max_steps=10**9, policy=self.policy(explore, random, frames, phase, noise),
                          break_when_any_done=True, auto_reset=True)
         if frames is not None:
             frames.append(self.eval_gym_env.render())  # the final state
@@ -176,6 +188,8 @@ class Trainer:
 
         train = self.options.train
         episodes = train.eval_episodes + train.eval_noisy_episodes
+        noise = (evaluation_noise(self.options.seed, self.state["env_step"])
+                 if train.eval_noise == "separate" else None)
 
         def rollouts(n: int, explore: bool) -> list[TensorDictBase]:
             out = []
@@ -185,7 +199,7 @@ class Trainer:
                 out.append(self.episode(self.eval_env, 10**6 + 1000 * self.options.seed + i,
                                         explore=explore, random=False,
                                         frames=frames if i == 0 and not explore else None,
-                                        phase="evaluation"))
+                                        phase="evaluation", noise=noise))
             return out
 
         played = rollouts(self.options.train.eval_episodes, explore=False)

@@ -158,15 +158,17 @@ class TDMPCAgent:
     def horizon(self, step: int) -> int:
         return int(round(self.horizon_schedule(step)))
 
-    def act(self, obs: torch.Tensor, step: int, explore: bool) -> torch.Tensor:
-        """Plan an action for ``obs``; ``step`` (agent steps) drives the schedules."""
+    def act(self, obs: torch.Tensor, step: int, explore: bool,
+            noise: NoiseSource | None = None) -> torch.Tensor:
+        """Plan an action for ``obs``; ``step`` (agent steps) drives the schedules. The
+        planner's randomness comes from ``noise`` (default: the agent's own generator)."""
         obs = obs.to(self.device, torch.float32)
         # Every equivariant weight expanded once for the whole plan, from the current
         # parameters (updates happen between calls, never inside one).
         with torch.no_grad(), expansion_scope(self.model):
             return self.planner.plan(obs, horizon=self.horizon(step),
                                      min_std=self.config.std_schedule(step), explore=explore,
-                                     noise=self.noise)
+                                     noise=self.noise if noise is None else noise)
 
     def _as_model_input(self, obs: torch.Tensor) -> torch.Tensor:
         return obs.to(self.device, next(self.model.parameters()).dtype)
