@@ -327,6 +327,7 @@ def test_changed_options_are_refused_on_resume(tmp_path, capsys):
     (["env=pointmass3d", "env.n_balls=0"], "n_balls must be an integer >= 1"),
     (["env=reacher", "env.frame=body"], "frame='body'; valid: 'local', 'global'"),
     (["agent.width_strategy=cube"], "width_strategy='cube'; valid: sqrt, linear"),
+    (["train.eval_noise=own"], "train.eval_noise='own'; valid: shared, separate"),
     (["+agent.planner.samples=3"], "unknown option agent.planner.samples; valid: discount,"),
     (["train.steps=abc"], "train.steps must be an integer, got 'abc'"),
     (["train.steps=2.5"], "train.steps must be an integer, got 2.5"),
