@@ -149,12 +149,13 @@ def test_value_is_invariant_and_policy_action_equivariant(env_id, kwargs, group,
 def test_plain_value_is_not_invariant(make_agent):
     env, sym, agent = make_agent("GeoMDP/PointMass2D-v0", {}, None)
     obs = torch.as_tensor(env.reset(seed=0)[0], dtype=torch.float64)
-    moved = torch.as_tensor(sym.transform_observation(obs.numpy(), groups.rotation_2d(np.pi / 2)))
+    g = groups.rotation_2d(np.pi / 2)
+    moved = torch.as_tensor(sym.transform_observation(obs.numpy(), g))
     assert abs(float(agent.value(moved)) - float(agent.value(obs))) > 1e-4
     # the plain agent's reward read is its reward head too (inspect_run's line), and not invariant
     action = agent.policy_action(obs)
     reward = agent.predicted_reward(obs, action)
     np.testing.assert_allclose(float(reward),
-                               float(agent.model.reward(agent.model.encode(obs), action)))
-    moved_action = torch.as_tensor(sym.transform_action(action.numpy(), groups.rotation_2d(np.pi / 2)))
+                               float(agent.model.reward(agent.model.encode(obs), action).detach()))
+    moved_action = torch.as_tensor(sym.transform_action(action.numpy(), g))
     assert abs(float(agent.predicted_reward(moved, moved_action)) - float(reward)) > 1e-6
