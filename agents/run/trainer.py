@@ -202,13 +202,13 @@ class Trainer:
                                         phase="evaluation", noise=noise))
             return out
 
-        played = rollouts(self.options.train.eval_episodes, explore=False)
+        played = rollouts(train.eval_episodes, explore=False)
         plain = [float(td["next", "reward"].sum()) for td in played]
         if frames:
             write_video(self.run_dir / "videos" / f"eval_{self.state['env_step']:08d}.mp4", frames,
                         frames_per_second(self.eval_gym_env, self.action_repeat))
         noisy = [float(td["next", "reward"].sum())
-                 for td in rollouts(self.options.train.eval_noisy_episodes, explore=True)]
+                 for td in rollouts(train.eval_noisy_episodes, explore=True)]
         self.state["last_eval_step"] = self.state["env_step"]
         self.state["last_eval_reward"] = float(np.mean(plain))
         self.log.log("eval", {
