@@ -341,6 +341,29 @@ def test_new_data_gets_the_largest_priority_ever_or_the_largest_held(within, tmp
         ReplayConfig(prioritized=False, max_priority_within_buffer=True)
 
 
+@pytest.mark.parametrize("eps", [1e-8, 1e-6])
+def test_priority_eps_sets_how_often_a_zero_error_slot_is_drawn(eps, tmp_path):
+    """agent.replay.priority_eps: a slot written with TD error 0 holds eps^alpha, one
+    written with error 1 holds (1 + eps)^alpha (TorchRL's eps 1e-8, TD-MPC's 1e-6), and
+    a checkpoint's save and load keep both."""
+    config = ReplayConfig(capacity=64, priority_eps=eps)
+    buffer = make_replay_buffer(config, horizon=3, batch_size=4)
+    buffer.extend(TensorDict({"observation": torch.zeros(10, 2),
+                              "episode": torch.zeros(10, dtype=torch.long)}, [10]))
+    buffer.update_priority(torch.arange(10), (torch.arange(10) % 2).float())
+    save_replay(buffer, tmp_path / "replay.pt")
+    loaded = make_replay_buffer(config, horizon=3, batch_size=4)
+    load_replay(loaded, tmp_path / "replay.pt")
+    for b in (buffer, loaded):
+        with internal("torchrl", "PrioritizedSampler._sum_tree"):
+            tree = priority_state(b.sampler, 10)["sum"]
+        assert float(tree[0]) == pytest.approx(eps ** config.alpha, rel=1e-5), changed(
+            "torchrl", f"a zero-error slot's priority with eps={eps}: {float(tree[0]):.3g}")
+        assert float(tree[1]) == pytest.approx((1 + eps) ** config.alpha, rel=1e-5)
+    with pytest.raises(OptionError, match="agent.replay.priority_eps must be > 0"):
+        ReplayConfig(priority_eps=0.0)
+
+
 def test_torchrl_expect_target_updater():
     from torchrl._utils import rl_warnings
 

@@ -25,6 +25,7 @@ ADDED_LATER = {"agent.augment": "none", "env.symmetry": None,
                "agent.networks.layer_norm": "every", "agent.networks.init": "default",
                "agent.loss.straight_through": False,
                "agent.replay.max_priority_within_buffer": False,
+               "agent.replay.priority_eps": 1e-8,
                "train.eval_noise": "shared"}
 
 

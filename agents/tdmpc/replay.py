@@ -31,6 +31,11 @@ class ReplayConfig:
     # New data's priority: false, the largest ever given (TorchRL's default); true, the
     # largest among the slots the buffer holds (TD-MPC's)
     max_priority_within_buffer: bool = False
+    # Added to every priority before the exponent alpha: (TD error + eps)^alpha. A slot
+    # whose TD error is 0 (every slot of the first update: zero-initialised Q heads and no
+    # reward) is drawn eps^alpha / p^alpha as often as one of priority p until a sample
+    # rewrites it. TorchRL's default 1e-8; TD-MPC's 1e-6
+    priority_eps: float = option(1e-8, low=0, low_open=True)
 
     def __post_init__(self) -> None:
         check(self)
@@ -50,6 +55,7 @@ def make_replay_buffer(config: ReplayConfig, horizon: int, batch_size: int,
     if config.prioritized:
         sampler = PrioritizedSliceSampler(max_capacity=config.capacity, alpha=config.alpha,
                                           beta=config.beta,
+                                          eps=config.priority_eps,
                                           max_priority_within_buffer=config.max_priority_within_buffer,
                                           **common)
     else:
