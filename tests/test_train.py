@@ -154,12 +154,15 @@ AGENTS = {"plain": [], "D8": ["agent.group=D8"],
           "SO3-pointmass3d": ["env=pointmass3d", "agent.group=SO3"],
           "O2-reacher": ["env=reacher", "agent.group=O2"],
           "plain-augmented": ["agent.augment=auto"],
-          "D8-separate-evaluation": ["agent.group=D8", "train.eval_noise=separate"]}
+          "D8-separate-evaluation": ["agent.group=D8", "train.eval_noise=separate"],
+          # TD-MPC's replay priorities (both non-defaults): restored with the buffer
+          "D8-tdmpc-priorities": ["agent.group=D8", "agent.replay.priority_eps=1e-6",
+                                  "agent.replay.max_priority_within_buffer=true"]}
 KILLS = [("plain", "seeding:100"), ("plain", "evaluation:200"), ("plain", "checkpoint_write:1"),
          ("plain", "checkpoint_cleanup:2"), ("D8", "update:100"), ("D8", "checkpoint_swap:1"),
          ("octahedral-pointmass3d", "update:60"), ("SO3-pointmass3d", "update:60"),
          ("O2-reacher", "checkpoint_swap:1"), ("plain-augmented", "update:100"),
-         ("D8-separate-evaluation", "evaluation:200")]
+         ("D8-separate-evaluation", "evaluation:200"), ("D8-tdmpc-priorities", "update:100")]
 
 
 @pytest.fixture(scope="module")
