@@ -42,6 +42,18 @@ REPLAY_KEYS = ("observation", "action", "episode", ("next", "observation"),
 EVALUATION_NOISE_KEY = 2_000_003  # keeps evaluation's generators apart from any other seed's
 
 
+def training_episode_seed(seed: int, episode: int) -> int:
+    """The environment seed of a run's training episode ``episode`` (from 0): its start
+    state and, on Reacher, its target, whatever the agent did before."""
+    return 1000 * seed + episode
+
+
+def evaluation_episode_seed(seed: int, i: int) -> int:
+    """The environment seed of every evaluation's episode ``i``: each evaluation of a run
+    starts from the same states."""
+    return 10**6 + 1000 * seed + i
+
+
 def evaluation_noise(seed: int, env_step: int) -> NoiseSource:
     """The planner noise of the evaluation at ``env_step`` under ``train.eval_noise=separate``:
     a generator of its own, a function of (seed, env step) only, so that evaluating draws
@@ -196,7 +208,7 @@ class Trainer:
             for i in range(n):
                 if self.progress is not None:
                     self.progress.evaluating(i + (train.eval_episodes if explore else 0), episodes)
-                out.append(self.episode(self.eval_env, 10**6 + 1000 * self.options.seed + i,
+                out.append(self.episode(self.eval_env, evaluation_episode_seed(self.options.seed, i),
                                         explore=explore, random=False,
                                         frames=frames if i == 0 and not explore else None,
                                         phase="evaluation", noise=noise))
@@ -284,7 +296,7 @@ class Trainer:
         start = time.perf_counter()
         self.progress.episode_started()
         random = state["env_step"] < cfg.seed_steps
-        td = self.episode(self.env, 1000 * self.options.seed + state["episode"], explore=True,
+        td = self.episode(self.env, training_episode_seed(self.options.seed, state["episode"]), explore=True,
                           random=random)
         length = td.shape[0]
         td.set("episode", torch.full((length,), state["episode"], dtype=torch.int64))
