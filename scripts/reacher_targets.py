@@ -1,54 +1,70 @@
-"""Which Reacher targets a run solved: success by the target's direction and distance, from its replay.
+"""Which Reacher targets a run solved: success by the target's direction and distance.
 
-    python scripts/reacher_targets.py RUN_DIR [--from-episode 20] [--solved 100]
+    python scripts/reacher_targets.py RUN_DIR [RUN_DIR ...] [--from-step 20000] [--solved 100]
 
 Reacher hard's returns are all or nothing (an episode either brings the finger into
 the target and holds it there, earning hundreds, or earns almost nothing), so a run's
-mean return says how often it solves a target, not which ones. This reads the
-training episodes a checkpoint's replay holds (``RUN_DIR/checkpoint/replay.pt``;
-``RUN_DIR/config.yaml`` gives the task's frame), puts each episode's target back in
-the arena (the finger's position, from the joint angles through the task's own
-kinematics, plus the observed vector to the target) and prints the share solved
-per direction of the target (eight 45° sectors, measured from the arena's x axis)
-and per distance from the arm's base, each with a permutation test of independence
-(the chi-square statistic against 10000 shufflings of which episodes were solved,
-exact enough at these small counts). A symmetric agent that solves a target solves
-its rotations alike; a plain one can cover some directions and not others.
-Episodes from ``--from-episode`` on count (Reacher's 1000-step episodes, so episode
-20 is env step 20k: after TD-MPC's warm-up and its burst of updates).
+mean return says how often it solves a target, not which ones. A training episode's
+start state and target are a function of the run's seed and the episode's index only
+(``agents.run.trainer.training_episode_seed``), so every committed run's targets can be
+drawn again without its checkpoint: this resets the run's task (``config.yaml``) with
+each episode's seed as the trainer does, reads the target, pairs it with the return
+``train.csv`` logged for that episode, and prints the share solved per direction of
+the target (eight 45° sectors from the arena's x axis) and per distance from the arm's
+base, each with a permutation test of independence (the chi-square statistic against
+10000 shufflings of which episodes were solved: exact enough at these small counts).
+Reacher's difficulty does not depend on the target's direction (the arm starts at a
+uniformly drawn angle), so a direction the run never solves is a hole in what it
+learned. Episodes starting from ``--from-step`` on count (default 20000: after TD-MPC's
+warm-up and its burst of updates); they ran with the training noise.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 from pathlib import Path
 
-import gymnasium
-import mujoco
 import numpy as np
-import torch
 from omegaconf import OmegaConf
 
-import geomdp_envs  # noqa: F401  (registers GeoMDP/*)
+from agents.run.config import RunOptions
+from agents.run.envs import make_gym_env, torchrl_env
+from agents.run.trainer import training_episode_seed
 
 SECTORS = 8
 DISTANCES = (0.05, 0.10, 0.15, 0.20)  # the task draws the target's distance in [0.05, 0.20]
 
 
-def episode_targets(observation: np.ndarray, episode: np.ndarray, frame: str) -> dict[int, np.ndarray]:
-    """The target's (x, y) in the arena per episode, from the episode's first observation
-    (cos q1, sin q1, cos, sin of the second link's angle, dq1, dq2, to_target x, y)."""
-    env = gymnasium.make("GeoMDP/Reacher-v0", frame=frame).unwrapped
-    targets = {}
-    for e in np.unique(episode):
-        o = observation[np.flatnonzero(episode == e)[0]]
-        q1 = np.arctan2(o[1], o[0])
-        second = np.arctan2(o[3], o[2])
-        env.data.qpos[:] = [q1, second if frame == "local" else second - q1]
-        mujoco.mj_kinematics(env.model, env.data)
-        targets[int(e)] = env.data.geom("finger").xpos[:2] + o[6:8]
+def run_options(run_dir: Path) -> RunOptions:
+    options = RunOptions.from_config(OmegaConf.to_container(OmegaConf.load(run_dir / "config.yaml")))
+    if options.env.name != "reacher":
+        raise SystemExit(f"{run_dir}: a run on {options.env.name!r}; this reads Reacher runs only")
+    return options
+
+
+def training_starts(options: RunOptions, episodes: range) -> tuple[np.ndarray, np.ndarray]:
+    """The first observation and the target's (x, y) of each training episode, drawn as
+    the trainer draws them (``set_seed`` with the episode's seed, then a reset)."""
+    gym_env = make_gym_env(options.env)
+    env = torchrl_env(gym_env, options.env.action_repeat)
+    observations, targets = [], []
+    for episode in episodes:
+        env.set_seed(training_episode_seed(options.seed, episode))
+        observations.append(env.reset()["observation"].numpy())
+        targets.append(gym_env.unwrapped.model.geom("target").pos[:2].copy())
     env.close()
-    return targets
+    return np.array(observations), np.array(targets)
+
+
+def episode_returns(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Each logged training episode's return and the env step it started at (train.csv
+    logs one row per episode, at its end)."""
+    with open(run_dir / "train.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    ends = np.array([int(row["env_step"]) for row in rows])
+    starts = np.concatenate([[0], ends[:-1]])
+    return np.array([float(row["episode_reward"]) for row in rows]), starts
 
 
 def independence_p(groups: np.ndarray, solved: np.ndarray, rng: np.random.Generator,
@@ -64,53 +80,53 @@ def independence_p(groups: np.ndarray, solved: np.ndarray, rng: np.random.Genera
     return (at_least + 1) / (shuffles + 1)
 
 
-def report(name: str, groups: np.ndarray, labels: list[str], solved: np.ndarray,
-           rng: np.random.Generator) -> None:
+def table(name: str, groups: np.ndarray, labels: list[str], solved: np.ndarray,
+          rng: np.random.Generator) -> str:
     cells = [f"{label} {np.sum(solved[groups == g])}/{np.sum(groups == g)}"
              for g, label in enumerate(labels)]
-    print(f"by {name}: " + ", ".join(cells)
-          + f"; independence p = {independence_p(groups, solved, rng):.2g}")
+    p = independence_p(groups, solved, rng)
+    return f"  by {name}: " + ", ".join(cells) + f"; independence p = {p:.2g}"
+
+
+def summary(run_dir: Path, from_step: int, threshold: float) -> list[str]:
+    options = run_options(run_dir)
+    returns, starts = episode_returns(run_dir)
+    counted = np.flatnonzero(starts >= from_step)
+    if not len(counted):
+        raise SystemExit(f"{run_dir}: no training episode starts at env step {from_step} or later "
+                         f"(train.csv ends at {starts[-1] if len(starts) else 0})")
+    _, xy = training_starts(options, range(counted[0], counted[-1] + 1))
+    returns, solved = returns[counted], returns[counted] > threshold
+    lines = [f"{run_dir}: episodes {counted[0]}-{counted[-1]} ({len(counted)}), "
+             f"solved {solved.sum()} (return > {threshold:g})"]
+    if solved.any() and (~solved).any():
+        lines.append(f"  returns: solved from {returns[solved].min():.0f}, "
+                     f"the others up to {returns[~solved].max():.0f}")
+    rng = np.random.default_rng(0)
+    width = 360 // SECTORS
+    angle = np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) % 360
+    lines.append(table("direction", (angle // width).astype(int),
+                       [f"{lo}-{lo + width}°" for lo in range(0, 360, width)], solved, rng))
+    distance = np.clip(np.digitize(np.linalg.norm(xy, axis=1), DISTANCES[1:-1]), 0, len(DISTANCES) - 2)
+    lines.append(table("distance", distance,
+                       [f"{lo:.2f}-{hi:.2f}" for lo, hi in zip(DISTANCES, DISTANCES[1:])], solved, rng))
+    return lines
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run_dir", type=Path, help="a Reacher run's directory, checkpoint included")
-    parser.add_argument("--from-episode", type=int, default=20,
-                        help="count episodes from this one on (default 20: after TD-MPC's warm-up)")
+    parser.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR",
+                        help="a Reacher run's directory (config.yaml, train.csv)")
+    parser.add_argument("--from-step", type=int, default=20000,
+                        help="count episodes starting at this env step or later (default 20000)")
     parser.add_argument("--solved", type=float, default=100.0,
                         help="an episode with a larger return counts as solved (default 100 of 1000)")
     args = parser.parse_args()
-    replay, config = args.run_dir / "checkpoint" / "replay.pt", args.run_dir / "config.yaml"
-    for path in (replay, config):
-        if not path.is_file():
-            raise SystemExit(f"{path}: no such file (RUN_DIR must hold config.yaml and checkpoint/replay.pt)")
-    env = OmegaConf.load(config).env
-    if env.name != "reacher":
-        raise SystemExit(f"{args.run_dir}: a run on {env.name!r}; this reads Reacher runs only")
-    data = torch.load(replay, weights_only=False)["data"]
-    episode = data["episode"].numpy()
-    reward = data["next", "reward"].numpy().reshape(-1)
-    targets = episode_targets(data["observation"].numpy(), episode, env.frame)
-    counted = [e for e in sorted(targets) if e >= args.from_episode]
-    if not counted:
-        raise SystemExit(f"{args.run_dir}: no episode from {args.from_episode} on "
-                         f"(the replay holds episodes {min(targets)}-{max(targets)})")
-    returns = np.array([reward[episode == e].sum() for e in counted])
-    solved = returns > args.solved
-    xy = np.array([targets[e] for e in counted])
-    angle = np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) % 360
-    distance = np.linalg.norm(xy, axis=1)
-    print(f"{args.run_dir}: episodes {counted[0]}-{counted[-1]} ({len(counted)}), "
-          f"solved {solved.sum()} (return > {args.solved:g})")
-    if solved.any() and (~solved).any():
-        print(f"returns: solved from {returns[solved].min():.0f}, "
-              f"the others up to {returns[~solved].max():.0f}")
-    rng = np.random.default_rng(0)
-    width = 360 // SECTORS
-    report("direction", (angle // width).astype(int),
-           [f"{lo}-{lo + width}°" for lo in range(0, 360, width)], solved, rng)
-    report("distance", np.clip(np.digitize(distance, DISTANCES[1:-1]), 0, len(DISTANCES) - 2),
-           [f"{lo:.2f}-{hi:.2f}" for lo, hi in zip(DISTANCES, DISTANCES[1:])], solved, rng)
+    for run_dir in args.run_dirs:
+        for name in ("config.yaml", "train.csv"):
+            if not (run_dir / name).is_file():
+                raise SystemExit(f"{run_dir / name}: no such file (RUN_DIR is a run's directory)")
+        print("\n".join(summary(run_dir, args.from_step, args.solved)), flush=True)
 
 
 if __name__ == "__main__":

@@ -1,80 +1,87 @@
-"""scripts/reacher_targets.py: a Reacher run's targets put back in the arena, success by direction."""
+"""scripts/reacher_targets.py: a Reacher run's training targets drawn again from its seed."""
 
 from __future__ import annotations
 
+import csv
 import importlib.util
 import re
 import subprocess
 import sys
 from pathlib import Path
 
-import gymnasium
 import numpy as np
 import pytest
 import torch
-from tensordict import TensorDict
 
-from agents.tdmpc.replay import ReplayConfig, make_replay_buffer, save_replay
+from agents.cli.train import run
+from agents.run.presets import compose_config
 
 SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "reacher_targets.py"
 SPEC = importlib.util.spec_from_file_location("reacher_targets", SCRIPT)
 reacher_targets = importlib.util.module_from_spec(SPEC)
 SPEC.loader.exec_module(reacher_targets)
 
-
-def episodes(frame: str, count: int, steps: int = 3):
-    """``count`` short random episodes: their observations, episode ids and true targets."""
-    env = gymnasium.make("GeoMDP/Reacher-v0", difficulty="hard", frame=frame)
-    env.action_space.seed(0)
-    observations, ids, targets = [], [], []
-    for e in range(count):
-        obs, _ = env.reset(seed=e)
-        targets.append(env.unwrapped.model.geom("target").pos[:2].copy())
-        for _ in range(steps):
-            observations.append(obs)
-            ids.append(e)
-            obs, *_ = env.step(env.action_space.sample())
-    return np.array(observations), np.array(ids), np.array(targets)
+# Three 1000-step Reacher episodes (125 agent steps), the first random, a tiny agent.
+TINY_REACHER = ["env=reacher", "env.difficulty=hard", "env.action_repeat=8", "seed=3",
+                "train.steps=3000", "train.seed_steps=1000", "train.eval_every=3000",
+                "train.eval_episodes=1", "train.eval_noisy_episodes=0", "train.progress=false",
+                "agent.networks.hidden_dim=16", "agent.networks.latent_dim=8",
+                "agent.planner.num_samples=16", "agent.planner.num_elites=4",
+                "agent.planner.num_pi_trajs=2", "agent.planner.iterations=1", "agent.horizon=3",
+                "agent.batch_size=8", "agent.replay.capacity=5000", "logger.tensorboard=false"]
 
 
-@pytest.mark.parametrize("frame", ["local", "global"])
-def test_targets_are_put_back_where_the_task_drew_them(frame):
-    observation, episode, truth = episodes(frame, count=6)
-    found = reacher_targets.episode_targets(observation, episode, frame)
-    assert sorted(found) == list(range(6))
-    np.testing.assert_allclose(np.array([found[e] for e in range(6)]), truth, atol=1e-5)
+@pytest.fixture(scope="module")
+def reacher_run(tmp_path_factory):
+    path = tmp_path_factory.mktemp("reacher")
+    assert run(compose_config(TINY_REACHER), path) == 0
+    return path
 
 
-def test_success_by_direction_is_tabled_and_tested(tmp_path):
-    """Episodes whose target lies in the upper half of the arena are solved, the others
-    not: the direction table shows it, and the permutation test rejects independence."""
-    observation, episode, truth = episodes("local", count=40)
-    upper = truth[:, 1] > 0
-    reward = torch.tensor(upper[episode], dtype=torch.float32).unsqueeze(1)
-    n = len(episode)
-    buffer = make_replay_buffer(ReplayConfig(capacity=n), horizon=2, batch_size=2)
-    buffer.extend(TensorDict({"observation": torch.tensor(observation, dtype=torch.float32),
-                              "episode": torch.tensor(episode),
-                              "action": torch.zeros(n, 2),
-                              "next": {"reward": reward}}, [n]))
-    (tmp_path / "checkpoint").mkdir()
-    save_replay(buffer, tmp_path / "checkpoint" / "replay.pt")
-    (tmp_path / "config.yaml").write_text("env:\n  name: reacher\n  frame: local\n")
-    out = subprocess.run([sys.executable, str(SCRIPT), str(tmp_path), "--from-episode", "0",
-                          "--solved", "2"], capture_output=True, text=True, check=True).stdout
-    assert f"episodes 0-39 (40), solved {upper.sum()} (return > 2)" in out
-    direction = next(line for line in out.splitlines() if line.startswith("by direction"))
+def test_training_episodes_are_drawn_again_from_the_seed(reacher_run):
+    """The start states drawn from the run's seed are the ones its replay holds, exactly,
+    and train.csv's returns are its episodes' in order."""
+    replay = torch.load(reacher_run / "checkpoint" / "replay.pt", weights_only=False)["data"]
+    episode = replay["episode"].numpy()
+    first = np.array([replay["observation"][np.flatnonzero(episode == e)[0]].numpy() for e in range(3)])
+    observations, targets = reacher_targets.training_starts(reacher_targets.run_options(reacher_run),
+                                                            range(3))
+    np.testing.assert_array_equal(observations, first)
+    assert len({tuple(t) for t in targets}) == 3  # a new target every episode
+    returns, starts = reacher_targets.episode_returns(reacher_run)
+    earned = [float(replay["next", "reward"][episode == e].sum()) for e in range(3)]
+    np.testing.assert_allclose(returns, earned, rtol=1e-5, atol=1e-4)
+    assert starts.tolist() == [0, 1000, 2000]
+
+
+def test_success_by_direction_is_tabled_and_tested(reacher_run, tmp_path):
+    """A train.csv whose episodes are solved exactly when the target lies in the upper
+    half of the arena: the direction table shows it, the permutation test rejects
+    independence."""
+    options = reacher_targets.run_options(reacher_run)
+    _, targets = reacher_targets.training_starts(options, range(40))
+    upper = targets[:, 1] > 0
+    (tmp_path / "config.yaml").write_text((reacher_run / "config.yaml").read_text())
+    with open(tmp_path / "train.csv", "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["env_step", "episode", "episode_reward"])
+        writer.writerows([1000 * (e + 1), e + 1, 500.0 if upper[e] else 3.0] for e in range(40))
+    out = subprocess.run([sys.executable, str(SCRIPT), str(tmp_path), "--from-step", "0"],
+                         capture_output=True, text=True, check=True).stdout
+    assert f"episodes 0-39 (40), solved {upper.sum()} (return > 100)" in out
+    assert "returns: solved from 500, the others up to 3" in out
+    direction = next(line for line in out.splitlines() if "by direction" in line)
     cells = re.findall(r"(\d+)-\d+° (\d+)/(\d+)", direction)
-    assert len(cells) == 8
+    assert len(cells) == 8 and sum(int(total) for *_, total in cells) == 40
     for low, solved, total in cells:  # sectors 0-180° all solved, 180-360° none
         assert int(solved) == (int(total) if int(low) < 180 else 0), direction
     assert float(direction.rsplit("p = ", 1)[1]) < 0.01
 
 
-def test_a_run_on_another_task_is_one_line(tmp_path):
-    (tmp_path / "checkpoint").mkdir()
-    (tmp_path / "checkpoint" / "replay.pt").write_bytes(b"")
-    (tmp_path / "config.yaml").write_text("env:\n  name: pointmass2d\n")
+def test_a_run_on_another_task_is_one_line(reacher_run, tmp_path):
+    config = (reacher_run / "config.yaml").read_text().replace("name: reacher", "name: pointmass2d", 1)
+    (tmp_path / "config.yaml").write_text(config)
+    (tmp_path / "train.csv").write_text("env_step,episode,episode_reward\n")
     result = subprocess.run([sys.executable, str(SCRIPT), str(tmp_path)], capture_output=True, text=True)
     assert result.returncode != 0
     assert result.stderr.strip() == f"{tmp_path}: a run on 'pointmass2d'; this reads Reacher runs only"
