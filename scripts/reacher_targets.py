@@ -10,13 +10,17 @@ start state and target are a function of the run's seed and the episode's index 
 drawn again without its checkpoint: this resets the run's task (``config.yaml``) with
 each episode's seed as the trainer does, reads the target, pairs it with the return
 ``train.csv`` logged for that episode, and prints the share solved per direction of
-the target (eight 45° sectors from the arena's x axis) and per distance from the arm's
-base, each with a permutation test of independence (the chi-square statistic against
-10000 shufflings of which episodes were solved: exact enough at these small counts).
+the target (eight 45° sectors from the arena's x axis), per direction relative to the
+arm's first link at the start, and per distance from the arm's base, each with a
+permutation test of independence (the chi-square statistic against 10000 shufflings
+of which episodes were solved: exact enough at these small counts).
+
 Reacher's difficulty does not depend on the target's direction (the arm starts at a
-uniformly drawn angle), so a direction the run never solves is a hole in what it
-learned. Episodes starting from ``--from-step`` on count (default 20000: after TD-MPC's
-warm-up and its burst of updates); they ran with the training noise.
+uniformly drawn angle), so a direction the run never solves, where the direction
+relative to the arm (which the difficulty can depend on) shows no such pattern, is a
+hole in what it learned: one an O(2)-equivariant agent cannot have. Episodes starting
+at ``--from-step`` or later count (default 20000: after TD-MPC's warm-up and its burst
+of updates); they ran with the training noise.
 """
 
 from __future__ import annotations
@@ -80,11 +84,10 @@ def independence_p(groups: np.ndarray, solved: np.ndarray, rng: np.random.Genera
     return (at_least + 1) / (shuffles + 1)
 
 
-def table(name: str, groups: np.ndarray, labels: list[str], solved: np.ndarray,
-          rng: np.random.Generator) -> str:
+def table(name: str, groups: np.ndarray, labels: list[str], solved: np.ndarray) -> str:
     cells = [f"{label} {np.sum(solved[groups == g])}/{np.sum(groups == g)}"
              for g, label in enumerate(labels)]
-    p = independence_p(groups, solved, rng)
+    p = independence_p(groups, solved, np.random.default_rng(0))
     return f"  by {name}: " + ", ".join(cells) + f"; independence p = {p:.2g}"
 
 
@@ -95,21 +98,23 @@ def summary(run_dir: Path, from_step: int, threshold: float) -> list[str]:
     if not len(counted):
         raise SystemExit(f"{run_dir}: no training episode starts at env step {from_step} or later "
                          f"(train.csv ends at {starts[-1] if len(starts) else 0})")
-    _, xy = training_starts(options, range(counted[0], counted[-1] + 1))
+    observations, xy = training_starts(options, range(counted[0], counted[-1] + 1))
     returns, solved = returns[counted], returns[counted] > threshold
     lines = [f"{run_dir}: episodes {counted[0]}-{counted[-1]} ({len(counted)}), "
              f"solved {solved.sum()} (return > {threshold:g})"]
     if solved.any() and (~solved).any():
         lines.append(f"  returns: solved from {returns[solved].min():.0f}, "
                      f"the others up to {returns[~solved].max():.0f}")
-    rng = np.random.default_rng(0)
     width = 360 // SECTORS
     angle = np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) % 360
     lines.append(table("direction", (angle // width).astype(int),
-                       [f"{lo}-{lo + width}°" for lo in range(0, 360, width)], solved, rng))
+                       [f"{lo}-{lo + width}°" for lo in range(0, 360, width)], solved))
+    arm = np.degrees(np.arctan2(observations[:, 1], observations[:, 0]))  # (cos q1, sin q1)
+    lines.append(table("direction relative to the arm's start", ((angle - arm) % 360 // width).astype(int),
+                       [f"{lo}-{lo + width}°" for lo in range(0, 360, width)], solved))
     distance = np.clip(np.digitize(np.linalg.norm(xy, axis=1), DISTANCES[1:-1]), 0, len(DISTANCES) - 2)
     lines.append(table("distance", distance,
-                       [f"{lo:.2f}-{hi:.2f}" for lo, hi in zip(DISTANCES, DISTANCES[1:])], solved, rng))
+                       [f"{lo:.2f}-{hi:.2f}" for lo, hi in zip(DISTANCES, DISTANCES[1:])], solved))
     return lines
 
 

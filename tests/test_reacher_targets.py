@@ -70,12 +70,14 @@ def test_success_by_direction_is_tabled_and_tested(reacher_run, tmp_path):
                          capture_output=True, text=True, check=True).stdout
     assert f"episodes 0-39 (40), solved {upper.sum()} (return > 100)" in out
     assert "returns: solved from 500, the others up to 3" in out
-    direction = next(line for line in out.splitlines() if "by direction" in line)
+    direction = next(line for line in out.splitlines() if "by direction:" in line)
     cells = re.findall(r"(\d+)-\d+° (\d+)/(\d+)", direction)
     assert len(cells) == 8 and sum(int(total) for *_, total in cells) == 40
     for low, solved, total in cells:  # sectors 0-180° all solved, 180-360° none
         assert int(solved) == (int(total) if int(low) < 180 else 0), direction
     assert float(direction.rsplit("p = ", 1)[1]) < 0.01
+    relative = next(line for line in out.splitlines() if "relative to the arm's start" in line)
+    assert sum(int(total) for total in re.findall(r"\d+°? \d+/(\d+)", relative)) == 40, relative
 
 
 def test_a_run_on_another_task_is_one_line(reacher_run, tmp_path):
