@@ -13,7 +13,9 @@ each episode's seed as the trainer does, reads the target, pairs it with the ret
 the target (eight 45° sectors from the arena's x axis), per direction relative to the
 arm's first link at the start, and per distance from the arm's base, each with a
 permutation test of independence (the chi-square statistic against 10000 shufflings
-of which episodes were solved: exact enough at these small counts).
+of which episodes were solved: exact enough at these small counts), and whether the
+direction holes last: the second half's success in the sectors the first half never
+solved, against elsewhere (summed over the runs when several are given).
 
 Reacher's difficulty does not depend on the target's direction (the arm starts at a
 uniformly drawn angle), so a direction the run never solves, where the direction
@@ -91,7 +93,22 @@ def table(name: str, groups: np.ndarray, labels: list[str], solved: np.ndarray) 
     return f"  by {name}: " + ", ".join(cells) + f"; independence p = {p:.2g}"
 
 
-def summary(run_dir: Path, from_step: int, threshold: float) -> list[str]:
+def persistence(sector: np.ndarray, solved: np.ndarray) -> np.ndarray:
+    """Do the direction holes last? Among the second half of the episodes: (solved, count)
+    in the sectors the first half never solved (and visited), then elsewhere."""
+    first = np.arange(len(solved)) < len(solved) // 2
+    holes = [k for k in np.unique(sector[first]) if not solved[first & (sector == k)].any()]
+    in_hole = np.isin(sector, holes)
+    return np.array([solved[~first & in_hole].sum(), (~first & in_hole).sum(),
+                     solved[~first & ~in_hole].sum(), (~first & ~in_hole).sum()])
+
+
+def persistence_line(counts: np.ndarray) -> str:
+    return (f"second half, in the sectors the first half never solved: {counts[0]}/{counts[1]} "
+            f"solved; elsewhere: {counts[2]}/{counts[3]}")
+
+
+def summary(run_dir: Path, from_step: int, threshold: float) -> tuple[list[str], np.ndarray]:
     options = run_options(run_dir)
     returns, starts = episode_returns(run_dir)
     counted = np.flatnonzero(starts >= from_step)
@@ -107,15 +124,17 @@ def summary(run_dir: Path, from_step: int, threshold: float) -> list[str]:
                      f"the others up to {returns[~solved].max():.0f}")
     width = 360 // SECTORS
     angle = np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) % 360
-    lines.append(table("direction", (angle // width).astype(int),
+    sector = (angle // width).astype(int)
+    lines.append(table("direction", sector,
                        [f"{lo}-{lo + width}°" for lo in range(0, 360, width)], solved))
+    lines.append("    " + persistence_line(held := persistence(sector, solved)))
     arm = np.degrees(np.arctan2(observations[:, 1], observations[:, 0]))  # (cos q1, sin q1)
     lines.append(table("direction relative to the arm's start", ((angle - arm) % 360 // width).astype(int),
                        [f"{lo}-{lo + width}°" for lo in range(0, 360, width)], solved))
     distance = np.clip(np.digitize(np.linalg.norm(xy, axis=1), DISTANCES[1:-1]), 0, len(DISTANCES) - 2)
     lines.append(table("distance", distance,
                        [f"{lo:.2f}-{hi:.2f}" for lo, hi in zip(DISTANCES, DISTANCES[1:])], solved))
-    return lines
+    return lines, held
 
 
 def main() -> None:
@@ -127,11 +146,16 @@ def main() -> None:
     parser.add_argument("--solved", type=float, default=100.0,
                         help="an episode with a larger return counts as solved (default 100 of 1000)")
     args = parser.parse_args()
+    held = np.zeros(4, dtype=int)
     for run_dir in args.run_dirs:
         for name in ("config.yaml", "train.csv"):
             if not (run_dir / name).is_file():
                 raise SystemExit(f"{run_dir / name}: no such file (RUN_DIR is a run's directory)")
-        print("\n".join(summary(run_dir, args.from_step, args.solved)), flush=True)
+        lines, counts = summary(run_dir, args.from_step, args.solved)
+        print("\n".join(lines), flush=True)
+        held += counts
+    if len(args.run_dirs) > 1:
+        print(f"all {len(args.run_dirs)} runs, {persistence_line(held)}")
 
 
 if __name__ == "__main__":

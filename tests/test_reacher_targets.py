@@ -87,3 +87,10 @@ def test_a_run_on_another_task_is_one_line(reacher_run, tmp_path):
     result = subprocess.run([sys.executable, str(SCRIPT), str(tmp_path)], capture_output=True, text=True)
     assert result.returncode != 0
     assert result.stderr.strip() == f"{tmp_path}: a run on 'pointmass2d'; this reads Reacher runs only"
+
+
+def test_persistence_counts_the_second_half_in_the_first_halfs_holes():
+    sector = np.array([0, 0, 1, 1, 0, 1, 0, 2])
+    solved = np.array([False, False, True, False, True, True, False, False])
+    # first half: sector 0 never solved (a hole), sector 1 solved once; sector 2 unvisited
+    assert reacher_targets.persistence(sector, solved).tolist() == [1, 2, 1, 2]
