@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from omegaconf import OmegaConf
 
+from agents.options import OptionError
 from agents.run import checkpoint
 from agents.run.config import RunOptions
 from agents.run.envs import make_gym_env
@@ -46,7 +46,10 @@ def main() -> None:
     parser.add_argument("--video", type=Path, default=None, help="write the first episode to this MP4")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    options = RunOptions.from_config(OmegaConf.to_container(OmegaConf.load(args.run_dir / "config.yaml")))
+    try:
+        options = RunOptions.from_run_dir(args.run_dir)
+    except OptionError as err:
+        raise SystemExit(str(err)) from None
     agent_cfg = options.agent
     env = make_gym_env(options.env,
                        render_mode="rgb_array" if args.video else None)

@@ -13,7 +13,8 @@ each episode's seed as the trainer does, reads the target, pairs it with the ret
 the target (eight 45° sectors from the arena's x axis), per direction relative to the
 arm's first link at the start, and per distance from the arm's base, each with a
 permutation test of independence (the chi-square statistic against 10000 shufflings
-of which episodes were solved: exact enough at these small counts), and whether the
+of which episodes were solved, ``scipy.stats.permutation_test``: exact enough at these
+small counts, where the chi-square distribution is not), and whether the
 direction holes last: the second half's success in the sectors the first half never
 solved, against elsewhere (summed over the runs when several are given).
 
@@ -32,7 +33,7 @@ import csv
 from pathlib import Path
 
 import numpy as np
-from omegaconf import OmegaConf
+from scipy.stats import permutation_test
 
 from agents.run.config import RunOptions
 from agents.run.envs import make_gym_env, torchrl_env
@@ -43,7 +44,7 @@ DISTANCES = (0.05, 0.10, 0.15, 0.20)  # the task draws the target's distance in 
 
 
 def run_options(run_dir: Path) -> RunOptions:
-    options = RunOptions.from_config(OmegaConf.to_container(OmegaConf.load(run_dir / "config.yaml")))
+    options = RunOptions.from_run_dir(run_dir)
     if options.env.name != "reacher":
         raise SystemExit(f"{run_dir}: a run on {options.env.name!r}; this reads Reacher runs only")
     return options
@@ -73,17 +74,26 @@ def episode_returns(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.array([float(row["episode_reward"]) for row in rows]), starts
 
 
+def chi_square(groups: np.ndarray, solved: np.ndarray, axis: int = -1) -> np.ndarray:
+    """Pearson's chi-square statistic of the solved × group table, for a batch of
+    ``solved`` vectors along ``axis`` (``scipy.stats.chi2_contingency`` computes it for
+    one table but refuses a table with an all-zero column: a run that solved every
+    target or none)."""
+    solved = np.moveaxis(np.asarray(solved, dtype=float), axis, -1)
+    members = (groups[:, None] == np.unique(groups)[None, :]).astype(float)  # episode × group
+    table = np.stack([solved @ members, (1 - solved) @ members], axis=-1)  # ... × group × {yes, no}
+    expected = table.sum(-1, keepdims=True) * table.sum(-2, keepdims=True) / len(groups)
+    return np.sum((table - expected) ** 2 / np.where(expected > 0, expected, 1), axis=(-2, -1))
+
+
 def independence_p(groups: np.ndarray, solved: np.ndarray, rng: np.random.Generator,
                    shuffles: int = 10000) -> float:
-    """Permutation p-value of the chi-square statistic of solved × group."""
-    def statistic(s: np.ndarray) -> float:
-        table = np.array([[np.sum((groups == g) & s), np.sum((groups == g) & ~s)]
-                          for g in np.unique(groups)], dtype=float)
-        expected = table.sum(1, keepdims=True) * table.sum(0, keepdims=True) / table.sum()
-        return float(np.sum((table - expected) ** 2 / np.where(expected > 0, expected, 1)))
-    observed = statistic(solved)
-    at_least = sum(statistic(rng.permutation(solved)) >= observed - 1e-12 for _ in range(shuffles))
-    return (at_least + 1) / (shuffles + 1)
+    """Permutation p-value of the chi-square statistic: which episodes were solved is
+    shuffled against their groups (``scipy.stats.permutation_test``, pairings)."""
+    result = permutation_test((solved,), lambda s, axis: chi_square(groups, s, axis),
+                              permutation_type="pairings", vectorized=True,
+                              n_resamples=shuffles, alternative="greater", rng=rng)
+    return float(result.pvalue)
 
 
 def table(name: str, groups: np.ndarray, labels: list[str], solved: np.ndarray) -> str:
@@ -125,12 +135,12 @@ def summary(run_dir: Path, from_step: int, threshold: float) -> tuple[list[str],
     width = 360 // SECTORS
     angle = np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) % 360
     sector = (angle // width).astype(int)
-    lines.append(table("direction", sector,
-                       [f"{lo}-{lo + width}°" for lo in range(0, 360, width)], solved))
+    sectors = [f"{lo}-{lo + width}°" for lo in range(0, 360, width)]
+    lines.append(table("direction", sector, sectors, solved))
     lines.append("    " + persistence_line(held := persistence(sector, solved)))
     arm = np.degrees(np.arctan2(observations[:, 1], observations[:, 0]))  # (cos q1, sin q1)
     lines.append(table("direction relative to the arm's start", ((angle - arm) % 360 // width).astype(int),
-                       [f"{lo}-{lo + width}°" for lo in range(0, 360, width)], solved))
+                       sectors, solved))
     distance = np.clip(np.digitize(np.linalg.norm(xy, axis=1), DISTANCES[1:-1]), 0, len(DISTANCES) - 2)
     lines.append(table("distance", distance,
                        [f"{lo:.2f}-{hi:.2f}" for lo, hi in zip(DISTANCES, DISTANCES[1:])], solved))

@@ -20,6 +20,14 @@ def pytest_configure(config: pytest.Config) -> None:
 
     torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
 
+# A tiny agent evaluated once per evaluation, quietly: the Hydra overrides a training
+# test adds to its task and budget (a run of a few thousand env steps takes seconds).
+TINY_AGENT = ["train.eval_episodes=1", "train.eval_noisy_episodes=0", "train.progress=false",
+              "agent.networks.hidden_dim=16", "agent.networks.latent_dim=8",
+              "agent.planner.num_samples=16", "agent.planner.num_elites=4",
+              "agent.planner.num_pi_trajs=2", "agent.planner.iterations=1", "agent.horizon=3",
+              "agent.batch_size=8", "agent.replay.capacity=5000", "logger.tensorboard=false"]
+
 # Every task configuration the suite offers, as gymnasium.make arguments.
 TASK_CONFIGS = [
     pytest.param(("GeoMDP/PointMass2D-v0", {}), id="pointmass2d"),

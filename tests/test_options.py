@@ -52,3 +52,20 @@ def test_good_options_build_and_keep_their_values():
     options = RunOptions.from_config({"env": {"id": "x"}, "logger": {"tensorboard": False}})
     assert options.logger.tensorboard is False and options.resolved["env"] == {"id": "x"}
     assert from_dict(RunOptions, {"env": {"id": "x"}}).checkpoint_options()["env.id"] == "x"
+
+
+def test_a_run_directorys_options_are_read_from_its_config(tmp_path):
+    """``RunOptions.from_run_dir``: what the run recorded, or one line naming the missing file."""
+    from omegaconf import OmegaConf
+
+    from agents.run.presets import compose_config
+
+    with pytest.raises(OptionError, match=r"config.yaml: no such file") as err:
+        RunOptions.from_run_dir(tmp_path)
+    assert "\n" not in str(err.value)
+    resolved = OmegaConf.to_container(compose_config(["env=reacher", "seed=4", "agent.group=D8"]),
+                                      resolve=True)
+    OmegaConf.save(OmegaConf.create(resolved), tmp_path / "config.yaml")
+    options = RunOptions.from_run_dir(tmp_path)
+    assert options.seed == 4 and options.env.name == "reacher" and options.agent.group == "D8"
+    assert options.resolved == resolved

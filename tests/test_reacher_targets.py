@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from conftest import TINY_AGENT
 
 from agents.cli.train import run
 from agents.run.presets import compose_config
@@ -23,12 +24,7 @@ SPEC.loader.exec_module(reacher_targets)
 
 # Three 1000-step Reacher episodes (125 agent steps), the first random, a tiny agent.
 TINY_REACHER = ["env=reacher", "env.difficulty=hard", "env.action_repeat=8", "seed=3",
-                "train.steps=3000", "train.seed_steps=1000", "train.eval_every=3000",
-                "train.eval_episodes=1", "train.eval_noisy_episodes=0", "train.progress=false",
-                "agent.networks.hidden_dim=16", "agent.networks.latent_dim=8",
-                "agent.planner.num_samples=16", "agent.planner.num_elites=4",
-                "agent.planner.num_pi_trajs=2", "agent.planner.iterations=1", "agent.horizon=3",
-                "agent.batch_size=8", "agent.replay.capacity=5000", "logger.tensorboard=false"]
+                "train.steps=3000", "train.seed_steps=1000", "train.eval_every=3000", *TINY_AGENT]
 
 
 @pytest.fixture(scope="module")
@@ -94,3 +90,18 @@ def test_persistence_counts_the_second_half_in_the_first_halfs_holes():
     solved = np.array([False, False, True, False, True, True, False, False])
     # first half: sector 0 never solved (a hole), sector 1 solved once; sector 2 unvisited
     assert reacher_targets.persistence(sector, solved).tolist() == [1, 2, 1, 2]
+
+
+def test_the_statistic_is_pearsons_chi_square_for_every_shuffle_in_a_batch():
+    """The vectorised statistic the permutation test shuffles equals SciPy's chi-square of
+    each table (which refuses only all-solved or none-solved runs), batch by batch."""
+    from scipy.stats import chi2_contingency
+
+    rng = np.random.default_rng(5)
+    groups = rng.integers(0, 8, 80)
+    batch = rng.random((6, 80)) < 0.3
+    for solved, statistic in zip(batch, reacher_targets.chi_square(groups, batch, axis=-1)):
+        table = [[np.sum((groups == g) & solved), np.sum((groups == g) & ~solved)]
+                 for g in np.unique(groups)]
+        assert statistic == pytest.approx(chi2_contingency(table, correction=False).statistic)
+    assert reacher_targets.chi_square(groups, np.ones(80, bool)) == 0

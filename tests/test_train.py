@@ -12,6 +12,7 @@ from types import SimpleNamespace
 import gymnasium
 import pytest
 import torch
+from conftest import TINY_AGENT
 from tensordict import TensorDict
 
 import geomdp_envs  # noqa: F401  (registers GeoMDP/*)
@@ -23,12 +24,7 @@ from agents.run.trainer import Trainer
 
 # A run small enough for CI: 125-step episodes, one evaluation episode, a tiny agent.
 TINY = ["env.action_repeat=8", "train.steps=2000", "train.seed_steps=1000",
-        "train.eval_every=1000", "train.eval_episodes=1", "train.eval_noisy_episodes=0",
-        "train.progress=false",
-        "agent.networks.hidden_dim=16", "agent.networks.latent_dim=8",
-        "agent.planner.num_samples=16", "agent.planner.num_elites=4",
-        "agent.planner.num_pi_trajs=2", "agent.planner.iterations=1", "agent.horizon=3",
-        "agent.batch_size=8", "agent.replay.capacity=5000", "logger.tensorboard=false"]
+        "train.eval_every=1000", *TINY_AGENT]
 TRAIN = [sys.executable, "-c", "from agents.cli.train import main; main()"]
 
 

@@ -10,10 +10,12 @@ import importlib.util
 import typing
 import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import gymnasium
 import torch
+from omegaconf import OmegaConf
 
 from agents.compat.torchrl import prioritized_replay_refusal
 from agents.nn.capacity import encoder_shortfall
@@ -150,6 +152,16 @@ class RunOptions:
         options = from_dict(cls, data)
         options.resolved = resolved
         return options
+
+    @classmethod
+    def from_run_dir(cls, run_dir: Path) -> RunOptions:
+        """The options a run was made with, from its directory's ``config.yaml`` (for tools
+        that read a finished run: drawing its episodes again, loading its checkpoint)."""
+        path = Path(run_dir) / "config.yaml"
+        if not path.is_file():
+            raise OptionError(f"{path}: no such file (a run directory holds the config.yaml "
+                              "its run was made with)")
+        return cls.from_config(OmegaConf.to_container(OmegaConf.load(path), resolve=True))
 
     def checkpoint_options(self) -> dict[str, Any]:
         """The options a checkpoint belongs to: all but those a continued run may change
