@@ -1,0 +1,186 @@
+"""What a PointMass agent does before it has earned any reward.
+
+    python scripts/before_reward.py untrained [--env pointmass3d] [--groups none octahedral icosahedral]
+    python scripts/before_reward.py runs RUN_DIR [RUN_DIR ...]
+
+PointMass's target sits at the origin, the point every rotation and reflection fixes, and
+the ball starts at rest. With one ball, a G-equivariant policy's action at rest is then an
+equivariant function of the ball's position alone, and for the groups used here that pins
+it to (nearly) the line through the target: exactly on the line where the position's
+stabiliser fixes nothing else (a symmetry axis of a finite group; everywhere for an exactly
+SO(3)-equivariant network, which the sampled ones here approximate), and up to terms of
+high degree elsewhere (icosahedral: no equivariant map from the vector representation to
+itself of degree 2-4 but the radial one; octahedral: degree 3 already has one). So an
+untrained equivariant policy pushes the ball straight toward the target or straight away
+from it (the sign a function of the distance), while a plain one pushes in a direction
+unrelated to the target. Sparse rewards (PointMass3D's small target) make this matter:
+before any reward a TD learner's values carry no information, and how it behaves then
+decides whether it ever finds the target.
+
+``untrained``: fresh agents (the CPU preset, ``linear`` width, one network per ``--inits``
+seed) on the task's start states: how well the policy's action at rest lines up with the
+ball's line to the target (mean |cos|; 1: on the line, 0.5: a random direction in 3D,
+2/pi in 2D), how many inits' policies head inward or outward, and the return of
+``--episodes`` episodes acted by the untrained policy alone (and, with ``--planner``, by
+the untrained planner, whose zero-initialised reward and Q heads give every plan the same
+value). ``runs``: from committed runs' ``train.csv`` alone, the first training episode a
+run solved (return above ``--solved``) and the reward it had earned before it, in the
+warm-up and after: did it find the target before it had seen reward?
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+from collections import defaultdict
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import torch
+from scipy.stats import fisher_exact
+
+import geomdp_envs  # noqa: F401  (registers GeoMDP/*)
+from agents import TDMPCAgent, agent_config
+from agents.options import OptionError
+from agents.run.config import RunOptions
+from geomdp_envs import symmetry_of
+
+TASKS = {"pointmass3d": "GeoMDP/PointMass3D-v0", "pointmass2d": "GeoMDP/PointMass2D-v0"}
+ACTION_REPEAT = 4  # the env configs' (configs/env/pointmass*.yaml)
+EARNED = 1.0  # "before it had seen reward": less than this much in all earlier episodes
+
+
+def alignment(observations: np.ndarray, actions: np.ndarray, dim: int) -> np.ndarray:
+    """cos(action on ball i, ball i's direction to the target) per start and ball; the
+    observation begins with the balls' positions relative to the target (at the origin)."""
+    balls = actions.shape[1] // dim
+    to_target = -observations[:, :balls * dim].reshape(len(observations), balls, dim)
+    pushed = actions.reshape(len(actions), balls, dim)
+    norms = np.linalg.norm(to_target, axis=-1) * np.linalg.norm(pushed, axis=-1)
+    return np.sum(to_target * pushed, axis=-1) / np.maximum(norms, 1e-12)
+
+
+def episode_return(env: gymnasium.Env, agent: TDMPCAgent, seed: int, planner: bool) -> float:
+    obs, _ = env.reset(seed=seed)
+    agent.start_episode()
+    total, done = 0.0, False
+    while not done:
+        o = torch.as_tensor(obs)
+        action = (agent.act(o, 0, explore=True) if planner else agent.policy_action(o)).numpy()
+        for _ in range(ACTION_REPEAT):
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total += reward
+            done = terminated or truncated
+            if done:
+                break
+    return total
+
+
+def untrained(args: argparse.Namespace) -> None:
+    kwargs = {"target_size": args.target_size, "n_balls": args.n_balls} if args.env == "pointmass3d" else {}
+    env = gymnasium.make(TASKS[args.env], **kwargs)
+    symmetry = symmetry_of(env)
+    starts = np.array([env.reset(seed=10**6 + i)[0] for i in range(args.starts)])
+    random_direction = 0.5 if symmetry.dim == 3 else 2 / math.pi
+    print(f"{args.env}{f' {kwargs}' if kwargs else ''}: {args.inits} untrained agents per group, "
+          f"the policy at {args.starts} start states (at rest; mean |cos| of a random direction: "
+          f"{random_direction:.3f}); returns of {args.episodes} episodes each, solved = "
+          f"return > {args.solved:g}", flush=True)
+    for group in args.groups:
+        heading, solved = {"inward": 0, "outward": 0}, {"policy": 0, "planner": 0}
+        for init in range(args.inits):
+            torch.manual_seed(init)
+            try:
+                agent = TDMPCAgent(agent_config("tdmpc", f"group={group}", "width_strategy=linear"),
+                                   symmetry, env.observation_space.shape[0],
+                                   env.action_space.shape[0], seed=init)
+            except (OptionError, ValueError) as err:  # a group the task does not allow
+                raise SystemExit(str(err)) from None
+            cos = alignment(starts, agent.policy_action(torch.as_tensor(starts)).numpy(), symmetry.dim)
+            heading["inward"] += cos.mean() > 0.5  # on average within 60 degrees of the way in
+            heading["outward"] += cos.mean() < -0.5
+            cell = f"|cos| {np.abs(cos).mean():.2f} cos {cos.mean():+.2f}"
+            for mode in ("policy", "planner") if args.planner else ("policy",):
+                returns = [episode_return(env, agent, 1000 * init + e, mode == "planner")
+                           for e in range(args.episodes)]
+                solved[mode] += sum(r > args.solved for r in returns)
+                cell += f", {mode} " + " ".join(f"{r:.0f}" for r in returns)
+            print(f"  {group} init {init}: {cell}", flush=True)
+        episodes = args.inits * args.episodes
+        print(f"{group}: the policy heads inward (mean cos > 0.5) on {heading['inward']} of "
+              f"{args.inits} inits, outward (< -0.5) on {heading['outward']}; solved by the "
+              "untrained " + ", ".join(f"{mode} {n}/{episodes}" for mode, n in solved.items()
+                                       if args.planner or mode == "policy"), flush=True)
+
+
+def first_solved(run_dir: Path, threshold: float) -> tuple[int | None, float, float, int]:
+    """(index of the first training episode with a return above ``threshold`` or None, the
+    reward earned before it in the warm-up, after the warm-up, the number of episodes)."""
+    with open(run_dir / "train.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    seed_steps = RunOptions.from_run_dir(run_dir).train.seed_steps
+    returns = [float(row["episode_reward"]) for row in rows]
+    first = next((i for i, r in enumerate(returns) if r > threshold), None)
+    ends = [int(row["env_step"]) for row in rows]
+    before = range(len(rows) if first is None else first)
+    warm = sum(returns[i] for i in before if ends[i] <= seed_steps)
+    return first, warm, sum(returns[i] for i in before) - warm, len(rows)
+
+
+def runs(args: argparse.Namespace) -> None:
+    found = defaultdict(lambda: [0, 0, 0])  # group: runs, solved at all, solved before EARNED
+    for run_dir in args.run_dirs:
+        if not (run_dir / "train.csv").is_file():
+            raise SystemExit(f"{run_dir / 'train.csv'}: no such file (RUN_DIR is a run's directory)")
+        options = RunOptions.from_run_dir(run_dir)
+        if not options.env.name.startswith("pointmass"):
+            raise SystemExit(f"{run_dir}: a run on {options.env.name!r}; this reads PointMass runs only")
+        first, warm, after, episodes = first_solved(run_dir, args.solved)
+        group = options.agent.group or "none"
+        found[group][0] += 1
+        if first is None:
+            print(f"{run_dir}: never solved in {episodes} episodes; earned {warm:.3g} in the "
+                  f"warm-up, {after:.3g} after", flush=True)
+            continue
+        found[group][1] += 1
+        found[group][2] += warm + after < EARNED
+        print(f"{run_dir}: first solved episode {first + 1} of {episodes}; earned before it "
+              f"{warm:.3g} in the warm-up, {after:.3g} after", flush=True)
+    for group, (total, solved, early) in found.items():
+        print(f"{group}: {total} runs, {solved} solved an episode, {early} of them before "
+              f"earning {EARNED:g} in all")
+    plain = found.pop("none", None)
+    if plain and found:
+        total, early = (sum(counts[i] for counts in found.values()) for i in (0, 2))
+        p = fisher_exact([[early, total - early], [plain[2], plain[0] - plain[2]]]).pvalue
+        print(f"solved before earning {EARNED:g}: equivariant {early} of {total} runs, plain "
+              f"{plain[2]} of {plain[0]}; Fisher's exact test p = {p:.2g} (rough: runs of one seed "
+              "share their warm-up)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--solved", type=float, default=100.0,
+                        help="an episode with a larger return counts as solved (default 100 of 1000)")
+    sub = parser.add_subparsers(dest="command", required=True)
+    fresh = sub.add_parser("untrained", help="fresh agents on the task's start states")
+    fresh.add_argument("--env", choices=tuple(TASKS), default="pointmass3d")
+    fresh.add_argument("--target-size", type=float, default=0.02,
+                       help="PointMass3D's target radius (default 0.02, the paper's small target)")
+    fresh.add_argument("--n-balls", type=int, default=1)
+    fresh.add_argument("--groups", nargs="+", default=["none", "octahedral", "icosahedral"])
+    fresh.add_argument("--inits", type=int, default=10, help="networks per group (seeds 0, 1, ...)")
+    fresh.add_argument("--starts", type=int, default=200, help="start states for the alignment")
+    fresh.add_argument("--episodes", type=int, default=2, help="episodes per network")
+    fresh.add_argument("--planner", action="store_true", help="also act with the untrained planner")
+    logged = sub.add_parser("runs", help="committed runs: the first solved episode and the reward before it")
+    logged.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    untrained(args) if args.command == "untrained" else runs(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,97 @@
+"""scripts/before_reward.py: an untrained equivariant policy pushes along the line to the
+target; the first solved episode and the reward earned before it, from train.csv."""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import pytest
+import torch
+from omegaconf import OmegaConf
+
+from agents import TDMPCAgent, agent_config
+from agents.run.presets import compose_config
+from geomdp_envs import symmetry_of
+
+SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "before_reward.py"
+SPEC = importlib.util.spec_from_file_location("before_reward", SCRIPT)
+before_reward = importlib.util.module_from_spec(SPEC)
+SPEC.loader.exec_module(before_reward)
+
+
+def test_alignment_is_the_cosine_with_each_balls_way_to_the_target():
+    positions = np.array([[0.1, 0.0, 0.0, 0.0, 0.2, 0.0]])  # two balls, at rest
+    observations = np.concatenate([positions, np.zeros_like(positions)], axis=1)
+    actions = np.array([[-1.0, 0.0, 0.0, 1.0, 0.0, 0.0]])  # ball 1 inward, ball 2 sideways
+    np.testing.assert_allclose(before_reward.alignment(observations, actions, 3), [[1.0, 0.0]])
+
+
+def axis_of_rotation(group, angle: float) -> np.ndarray:
+    """The axis of one of the group's rotations by ``angle``."""
+    for element in group.elements():
+        matrix = group.element_matrix(element)
+        if np.isclose(np.linalg.det(matrix), 1) and np.isclose(np.trace(matrix), 1 + 2 * np.cos(angle)):
+            values, vectors = np.linalg.eig(matrix)
+            return np.real(vectors[:, np.argmin(np.abs(values - 1))])
+    raise AssertionError(f"no rotation by {angle} in {group}")
+
+
+@pytest.mark.parametrize("group, angle", [("icosahedral", 2 * np.pi / 5), ("octahedral", np.pi / 2)])
+def test_an_untrained_equivariant_policy_at_rest_on_a_symmetry_axis_pushes_along_it(group, angle):
+    """On an axis whose rotations fix nothing else, equivariance alone puts the action at
+    rest on the line to the target (the origin), whatever the weights; a plain network's
+    action there points elsewhere."""
+    env = gymnasium.make("GeoMDP/PointMass3D-v0")
+    torch.manual_seed(0)
+    agent = TDMPCAgent(agent_config("tdmpc", f"group={group}", "width_strategy=linear"),
+                       symmetry_of(env), 6, 3)
+    axis = axis_of_rotation(agent.networks.group, angle)
+    starts = np.array([[*(r * axis), 0, 0, 0] for r in (0.05, 0.15, -0.25)], dtype=np.float32)
+    cos = before_reward.alignment(starts, agent.policy_action(torch.as_tensor(starts)).numpy(), 3)
+    np.testing.assert_allclose(np.abs(cos), 1, atol=1e-5)
+    torch.manual_seed(0)
+    plain = TDMPCAgent(agent_config("tdmpc", "group=none"), symmetry_of(env), 6, 3)
+    cos = before_reward.alignment(starts, plain.policy_action(torch.as_tensor(starts)).numpy(), 3)
+    assert np.all(np.abs(cos) < 0.99), cos
+
+
+def write_run(path: Path, group: str, returns: list[float]) -> Path:
+    path.mkdir(parents=True)
+    resolved = OmegaConf.to_container(compose_config(["env=pointmass3d", f"agent.group={group}",
+                                                      "train.seed_steps=2000"]), resolve=True)
+    OmegaConf.save(OmegaConf.create(resolved), path / "config.yaml")
+    with open(path / "train.csv", "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["env_step", "episode", "episode_reward"])
+        writer.writerows([1000 * (e + 1), e + 1, r] for e, r in enumerate(returns))
+    return path
+
+
+def test_the_first_solved_episode_and_the_reward_before_it(tmp_path):
+    early = write_run(tmp_path / "icosahedral", "icosahedral", [0.25, 0.0, 0.5, 850.0, 900.0])
+    late = write_run(tmp_path / "plain", "none", [0.0, 0.0, 40.0, 99.0, 300.0])
+    never = write_run(tmp_path / "never", "none", [0.0, 3.0, 0.0])
+    assert before_reward.first_solved(early, 100.0) == (3, 0.25, 0.5, 5)
+    out = subprocess.run([sys.executable, str(SCRIPT), "runs", str(early), str(late), str(never)],
+                         capture_output=True, text=True, check=True).stdout
+    assert f"{early}: first solved episode 4 of 5; earned before it 0.25 in the warm-up, 0.5 after" in out
+    assert f"{late}: first solved episode 5 of 5; earned before it 0 in the warm-up, 139 after" in out
+    assert f"{never}: never solved in 3 episodes; earned 3 in the warm-up, 0 after" in out
+    assert "icosahedral: 1 runs, 1 solved an episode, 1 of them before earning 1 in all" in out
+    assert "none: 2 runs, 1 solved an episode, 0 of them before earning 1 in all" in out
+    assert "equivariant 1 of 1 runs, plain 0 of 2; Fisher's exact test p = 0.33" in out
+
+
+def test_a_run_on_another_task_is_one_line(tmp_path):
+    run = write_run(tmp_path / "run", "none", [0.0])
+    config = (run / "config.yaml").read_text().replace("name: pointmass3d", "name: reacher", 1)
+    (run / "config.yaml").write_text(config)
+    result = subprocess.run([sys.executable, str(SCRIPT), "runs", str(run)], capture_output=True, text=True)
+    assert result.returncode != 0
+    assert result.stderr.strip() == f"{run}: a run on 'reacher'; this reads PointMass runs only"
