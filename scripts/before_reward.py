@@ -129,8 +129,15 @@ def first_solved(run_dir: Path, threshold: float) -> tuple[int | None, float, fl
     return first, warm, sum(returns[i] for i in before) - warm, len(rows)
 
 
+def agent_label(options: RunOptions) -> str:
+    """The agent's group, or ``plain`` (with its replay augmentation, if any)."""
+    if options.agent.group:
+        return options.agent.group
+    return "plain" if options.agent.augment == "none" else f"plain, {options.agent.augment} augmentation"
+
+
 def runs(args: argparse.Namespace) -> None:
-    found = defaultdict(lambda: [0, 0, 0])  # group: runs, solved at all, solved before EARNED
+    found = defaultdict(lambda: [0, 0, 0])  # agent: runs, solved at all, solved before EARNED
     for run_dir in args.run_dirs:
         if not (run_dir / "train.csv").is_file():
             raise SystemExit(f"{run_dir / 'train.csv'}: no such file (RUN_DIR is a run's directory)")
@@ -138,26 +145,29 @@ def runs(args: argparse.Namespace) -> None:
         if not options.env.name.startswith("pointmass"):
             raise SystemExit(f"{run_dir}: a run on {options.env.name!r}; this reads PointMass runs only")
         first, warm, after, episodes = first_solved(run_dir, args.solved)
-        group = options.agent.group or "none"
-        found[group][0] += 1
+        counts = found[agent_label(options)]
+        counts[0] += 1
         if first is None:
             print(f"{run_dir}: never solved in {episodes} episodes; earned {warm:.3g} in the "
                   f"warm-up, {after:.3g} after", flush=True)
             continue
-        found[group][1] += 1
-        found[group][2] += warm + after < EARNED
+        counts[1] += 1
+        counts[2] += warm + after < EARNED
         print(f"{run_dir}: first solved episode {first + 1} of {episodes}; earned before it "
               f"{warm:.3g} in the warm-up, {after:.3g} after", flush=True)
-    for group, (total, solved, early) in found.items():
-        print(f"{group}: {total} runs, {solved} solved an episode, {early} of them before "
+    for agent, (total, solved, early) in found.items():
+        print(f"{agent}: {total} runs, {solved} solved an episode, {early} of them before "
               f"earning {EARNED:g} in all")
-    plain = found.pop("none", None)
-    if plain and found:
-        total, early = (sum(counts[i] for counts in found.values()) for i in (0, 2))
-        p = fisher_exact([[early, total - early], [plain[2], plain[0] - plain[2]]]).pvalue
-        print(f"solved before earning {EARNED:g}: equivariant {early} of {total} runs, plain "
-              f"{plain[2]} of {plain[0]}; Fisher's exact test p = {p:.2g} (rough: runs of one seed "
-              "share their warm-up)")
+    # the prior is the untrained networks': augmented replay leaves them plain
+    plain = [found[a] for a in found if a.startswith("plain")]
+    equivariant = [found[a] for a in found if not a.startswith("plain")]
+    if plain and equivariant:
+        (total, early), (plain_total, plain_early) = (
+            [sum(counts[i] for counts in side) for i in (0, 2)] for side in (equivariant, plain))
+        p = fisher_exact([[early, total - early], [plain_early, plain_total - plain_early]]).pvalue
+        print(f"solved before earning {EARNED:g}: equivariant networks {early} of {total} runs, "
+              f"plain networks {plain_early} of {plain_total}; Fisher's exact test p = {p:.2g} "
+              "(rough: runs of one seed share their warm-up)")
 
 
 def main() -> None:

@@ -61,10 +61,11 @@ def test_an_untrained_equivariant_policy_at_rest_on_a_symmetry_axis_pushes_along
     assert np.all(np.abs(cos) < 0.99), cos
 
 
-def write_run(path: Path, group: str, returns: list[float]) -> Path:
+def write_run(path: Path, group: str, returns: list[float], *overrides: str) -> Path:
     path.mkdir(parents=True)
     resolved = OmegaConf.to_container(compose_config(["env=pointmass3d", f"agent.group={group}",
-                                                      "train.seed_steps=2000"]), resolve=True)
+                                                      "train.seed_steps=2000", *overrides]),
+                                      resolve=True)
     OmegaConf.save(OmegaConf.create(resolved), path / "config.yaml")
     with open(path / "train.csv", "w", newline="") as f:
         writer = csv.writer(f)
@@ -76,7 +77,7 @@ def write_run(path: Path, group: str, returns: list[float]) -> Path:
 def test_the_first_solved_episode_and_the_reward_before_it(tmp_path):
     early = write_run(tmp_path / "icosahedral", "icosahedral", [0.25, 0.0, 0.5, 850.0, 900.0])
     late = write_run(tmp_path / "plain", "none", [0.0, 0.0, 40.0, 99.0, 300.0])
-    never = write_run(tmp_path / "never", "none", [0.0, 3.0, 0.0])
+    never = write_run(tmp_path / "never", "none", [0.0, 3.0, 0.0], "agent.augment=auto")
     assert before_reward.first_solved(early, 100.0) == (3, 0.25, 0.5, 5)
     out = subprocess.run([sys.executable, str(SCRIPT), "runs", str(early), str(late), str(never)],
                          capture_output=True, text=True, check=True).stdout
@@ -84,8 +85,9 @@ def test_the_first_solved_episode_and_the_reward_before_it(tmp_path):
     assert f"{late}: first solved episode 5 of 5; earned before it 0 in the warm-up, 139 after" in out
     assert f"{never}: never solved in 3 episodes; earned 3 in the warm-up, 0 after" in out
     assert "icosahedral: 1 runs, 1 solved an episode, 1 of them before earning 1 in all" in out
-    assert "none: 2 runs, 1 solved an episode, 0 of them before earning 1 in all" in out
-    assert "equivariant 1 of 1 runs, plain 0 of 2; Fisher's exact test p = 0.33" in out
+    assert "plain: 1 runs, 1 solved an episode, 0 of them before earning 1 in all" in out
+    assert "plain, auto augmentation: 1 runs, 0 solved an episode, 0 of them before" in out
+    assert "equivariant networks 1 of 1 runs, plain networks 0 of 2; Fisher's exact test p = 0.33" in out
 
 
 def test_a_run_on_another_task_is_one_line(tmp_path):
