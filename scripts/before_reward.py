@@ -39,16 +39,18 @@ from pathlib import Path
 import gymnasium
 import numpy as np
 import torch
+from omegaconf import OmegaConf
 from scipy.stats import fisher_exact
 
 import geomdp_envs  # noqa: F401  (registers GeoMDP/*)
 from agents import TDMPCAgent, agent_config
 from agents.options import OptionError
 from agents.run.config import RunOptions
+from agents.run.envs import make_gym_env
+from agents.run.presets import compose_config
 from geomdp_envs import symmetry_of
 
-TASKS = {"pointmass3d": "GeoMDP/PointMass3D-v0", "pointmass2d": "GeoMDP/PointMass2D-v0"}
-ACTION_REPEAT = 4  # the env configs' (configs/env/pointmass*.yaml)
+TASKS = ("pointmass3d", "pointmass2d")  # configs/env/: the target at the origin, the ball at rest
 EARNED = 1.0  # "before it had seen reward": less than this much in all earlier episodes
 
 
@@ -62,14 +64,15 @@ def alignment(observations: np.ndarray, actions: np.ndarray, dim: int) -> np.nda
     return np.sum(to_target * pushed, axis=-1) / np.maximum(norms, 1e-12)
 
 
-def episode_return(env: gymnasium.Env, agent: TDMPCAgent, seed: int, planner: bool) -> float:
+def episode_return(env: gymnasium.Env, action_repeat: int, agent: TDMPCAgent, seed: int,
+                   planner: bool) -> float:
     obs, _ = env.reset(seed=seed)
     agent.start_episode()
     total, done = 0.0, False
     while not done:
         o = torch.as_tensor(obs)
         action = (agent.act(o, 0, explore=True) if planner else agent.policy_action(o)).numpy()
-        for _ in range(ACTION_REPEAT):
+        for _ in range(action_repeat):
             obs, reward, terminated, truncated, _ = env.step(action)
             total += reward
             done = terminated or truncated
@@ -79,12 +82,16 @@ def episode_return(env: gymnasium.Env, agent: TDMPCAgent, seed: int, planner: bo
 
 
 def untrained(args: argparse.Namespace) -> None:
-    kwargs = {"target_size": args.target_size, "n_balls": args.n_balls} if args.env == "pointmass3d" else {}
-    env = gymnasium.make(TASKS[args.env], **kwargs)
+    task = ([f"env.target_size={args.target_size}", f"env.n_balls={args.n_balls}"]
+            if args.env == "pointmass3d" else [])
+    options = RunOptions.from_config(OmegaConf.to_container(compose_config([f"env={args.env}", *task]),
+                                                            resolve=True)).env
+    env = make_gym_env(options)
     symmetry = symmetry_of(env)
     starts = np.array([env.reset(seed=10**6 + i)[0] for i in range(args.starts)])
     random_direction = 0.5 if symmetry.dim == 3 else 2 / math.pi
-    print(f"{args.env}{f' {kwargs}' if kwargs else ''}: {args.inits} untrained agents per group, "
+    arguments = f" {options.kwargs}" if options.kwargs else ""
+    print(f"{args.env}{arguments}: {args.inits} untrained agents per group, "
           f"the policy at {args.starts} start states (at rest; mean |cos| of a random direction: "
           f"{random_direction:.3f}); returns of {args.episodes} episodes each, solved = "
           f"return > {args.solved:g}", flush=True)
@@ -103,7 +110,8 @@ def untrained(args: argparse.Namespace) -> None:
             heading["outward"] += cos.mean() < -0.5
             cell = f"|cos| {np.abs(cos).mean():.2f} cos {cos.mean():+.2f}"
             for mode in ("policy", "planner") if args.planner else ("policy",):
-                returns = [episode_return(env, agent, 1000 * init + e, mode == "planner")
+                returns = [episode_return(env, options.action_repeat, agent, 1000 * init + e,
+                                          mode == "planner")
                            for e in range(args.episodes)]
                 solved[mode] += sum(r > args.solved for r in returns)
                 cell += f", {mode} " + " ".join(f"{r:.0f}" for r in returns)
@@ -176,7 +184,7 @@ def main() -> None:
                         help="an episode with a larger return counts as solved (default 100 of 1000)")
     sub = parser.add_subparsers(dest="command", required=True)
     fresh = sub.add_parser("untrained", help="fresh agents on the task's start states")
-    fresh.add_argument("--env", choices=tuple(TASKS), default="pointmass3d")
+    fresh.add_argument("--env", choices=TASKS, default="pointmass3d")
     fresh.add_argument("--target-size", type=float, default=0.02,
                        help="PointMass3D's target radius (default 0.02, the paper's small target)")
     fresh.add_argument("--n-balls", type=int, default=1)
