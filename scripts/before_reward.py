@@ -95,8 +95,9 @@ def untrained(args: argparse.Namespace) -> None:
           f"the policy at {args.starts} start states (at rest; mean |cos| of a random direction: "
           f"{random_direction:.3f}); returns of {args.episodes} episodes each, solved = "
           f"return > {args.solved:g}", flush=True)
+    modes = ("policy", "planner") if args.planner else ("policy",)
     for group in args.groups:
-        heading, solved = {"inward": 0, "outward": 0}, {"policy": 0, "planner": 0}
+        heading, solved = {"inward": 0, "outward": 0}, dict.fromkeys(modes, 0)
         for init in range(args.inits):
             torch.manual_seed(init)
             try:
@@ -109,7 +110,7 @@ def untrained(args: argparse.Namespace) -> None:
             heading["inward"] += cos.mean() > 0.5  # on average within 60 degrees of the way in
             heading["outward"] += cos.mean() < -0.5
             cell = f"|cos| {np.abs(cos).mean():.2f} cos {cos.mean():+.2f}"
-            for mode in ("policy", "planner") if args.planner else ("policy",):
+            for mode in modes:
                 returns = [episode_return(env, options.action_repeat, agent, 1000 * init + e,
                                           mode == "planner")
                            for e in range(args.episodes)]
@@ -119,16 +120,16 @@ def untrained(args: argparse.Namespace) -> None:
         episodes = args.inits * args.episodes
         print(f"{group}: the policy heads inward (mean cos > 0.5) on {heading['inward']} of "
               f"{args.inits} inits, outward (< -0.5) on {heading['outward']}; solved by the "
-              "untrained " + ", ".join(f"{mode} {n}/{episodes}" for mode, n in solved.items()
-                                       if args.planner or mode == "policy"), flush=True)
+              "untrained " + ", ".join(f"{mode} {n}/{episodes}" for mode, n in solved.items()),
+              flush=True)
 
 
-def first_solved(run_dir: Path, threshold: float) -> tuple[int | None, float, float, int]:
+def first_solved(run_dir: Path, seed_steps: int, threshold: float) -> tuple[int | None, float, float, int]:
     """(index of the first training episode with a return above ``threshold`` or None, the
-    reward earned before it in the warm-up, after the warm-up, the number of episodes)."""
+    reward earned before it in the warm-up (its first ``seed_steps`` env steps), after the
+    warm-up, the number of episodes)."""
     with open(run_dir / "train.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    seed_steps = RunOptions.from_run_dir(run_dir).train.seed_steps
     returns = [float(row["episode_reward"]) for row in rows]
     first = next((i for i, r in enumerate(returns) if r > threshold), None)
     ends = [int(row["env_step"]) for row in rows]
@@ -152,7 +153,7 @@ def runs(args: argparse.Namespace) -> None:
         options = RunOptions.from_run_dir(run_dir)
         if not options.env.name.startswith("pointmass"):
             raise SystemExit(f"{run_dir}: a run on {options.env.name!r}; this reads PointMass runs only")
-        first, warm, after, episodes = first_solved(run_dir, args.solved)
+        first, warm, after, episodes = first_solved(run_dir, options.train.seed_steps, args.solved)
         counts = found[agent_label(options)]
         counts[0] += 1
         if first is None:

@@ -78,7 +78,7 @@ def test_the_first_solved_episode_and_the_reward_before_it(tmp_path):
     early = write_run(tmp_path / "icosahedral", "icosahedral", [0.25, 0.0, 0.5, 850.0, 900.0])
     late = write_run(tmp_path / "plain", "none", [0.0, 0.0, 40.0, 99.0, 300.0])
     never = write_run(tmp_path / "never", "none", [0.0, 3.0, 0.0], "agent.augment=auto")
-    assert before_reward.first_solved(early, 100.0) == (3, 0.25, 0.5, 5)
+    assert before_reward.first_solved(early, 2000, 100.0) == (3, 0.25, 0.5, 5)
     out = subprocess.run([sys.executable, str(SCRIPT), "runs", str(early), str(late), str(never)],
                          capture_output=True, text=True, check=True).stdout
     assert f"{early}: first solved episode 4 of 5; earned before it 0.25 in the warm-up, 0.5 after" in out
