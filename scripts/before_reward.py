@@ -31,7 +31,6 @@ warm-up and after: did it find the target before it had seen reward?
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 from collections import defaultdict
 from pathlib import Path
@@ -48,6 +47,7 @@ from agents.options import OptionError
 from agents.run.config import RunOptions
 from agents.run.envs import make_gym_env
 from agents.run.presets import compose_config
+from agents.run.run_tables import training_episodes
 from geomdp_envs import symmetry_of
 
 TASKS = ("pointmass3d", "pointmass2d")  # configs/env/: the target at the origin, the ball at rest
@@ -128,14 +128,11 @@ def first_solved(run_dir: Path, seed_steps: int, threshold: float) -> tuple[int 
     """(index of the first training episode with a return above ``threshold`` or None, the
     reward earned before it in the warm-up (its first ``seed_steps`` env steps), after the
     warm-up, the number of episodes)."""
-    with open(run_dir / "train.csv", newline="") as f:
-        rows = list(csv.DictReader(f))
-    returns = [float(row["episode_reward"]) for row in rows]
-    first = next((i for i, r in enumerate(returns) if r > threshold), None)
-    ends = [int(row["env_step"]) for row in rows]
-    before = range(len(rows) if first is None else first)
-    warm = sum(returns[i] for i in before if ends[i] <= seed_steps)
-    return first, warm, sum(returns[i] for i in before) - warm, len(rows)
+    episodes = training_episodes(run_dir)
+    first = next((i for i, e in enumerate(episodes) if e.reward > threshold), None)
+    before = episodes[:first]
+    warm = sum(e.reward for e in before if e.end <= seed_steps)
+    return first, warm, sum(e.reward for e in before) - warm, len(episodes)
 
 
 def agent_label(options: RunOptions) -> str:

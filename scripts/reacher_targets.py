@@ -29,7 +29,6 @@ of updates); they ran with the training noise.
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +36,7 @@ from scipy.stats import permutation_test
 
 from agents.run.config import RunOptions
 from agents.run.envs import make_gym_env, torchrl_env
+from agents.run.run_tables import training_episodes
 from agents.run.trainer import training_episode_seed
 
 SECTORS = 8
@@ -65,13 +65,10 @@ def training_starts(options: RunOptions, episodes: range) -> tuple[np.ndarray, n
 
 
 def episode_returns(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Each logged training episode's return and the env step it started at (train.csv
-    logs one row per episode, at its end)."""
-    with open(run_dir / "train.csv", newline="") as f:
-        rows = list(csv.DictReader(f))
-    ends = np.array([int(row["env_step"]) for row in rows])
-    starts = np.concatenate([[0], ends[:-1]])
-    return np.array([float(row["episode_reward"]) for row in rows]), starts
+    """Each logged training episode's return and the env step it started at."""
+    episodes = training_episodes(run_dir)
+    return (np.array([e.reward for e in episodes]),
+            np.array([e.start for e in episodes], dtype=int))
 
 
 def chi_square(groups: np.ndarray, solved: np.ndarray, axis: int = -1) -> np.ndarray:

@@ -12,7 +12,7 @@ from test_train import TINY, TRAIN
 from agents.cli import plot
 from agents.run import results, statistics
 from agents.run.presets import CONFIG_DIR, compose_config
-from agents.run.run_tables import evaluation_share, wall_minutes
+from agents.run.run_tables import TrainingEpisode, evaluation_share, training_episodes, wall_minutes
 from agents.run.td_invariants import bootstrapped_returns, td_invariants, value_at_start
 
 EXPERIMENTS = sorted(p.stem for p in (CONFIG_DIR / "experiment").glob("*.yaml"))
@@ -347,6 +347,17 @@ def test_evaluation_share_is_the_wall_time_not_spent_training(tmp_path, capsys):
     assert "| 0 5.0 | 1 (50%) |" in capsys.readouterr().out
     (run / "train.csv").write_text("env_step,wall_time\n1000,10.0\n")  # a log from before
     assert evaluation_share(run) is None and evaluation_share(tmp_path / "missing") is None
+
+
+def test_training_episodes_start_where_the_previous_one_ended(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "train.csv").write_text("env_step,q_mean,episode_reward\n250,,0.5\n"
+                                   "500,0.1,12.0\n1250.0,0.2,900\n")
+    assert training_episodes(run) == [TrainingEpisode(0, 250, 0.5), TrainingEpisode(250, 500, 12.0),
+                                      TrainingEpisode(500, 1250, 900.0)]
+    with pytest.raises(FileNotFoundError, match="train.csv: no such file"):
+        training_episodes(tmp_path)
 
 
 def test_plot_shows_published_per_seed_results_up_to_the_longest_run(tmp_path, capsys):

@@ -8,6 +8,7 @@ networks' libraries.
 from __future__ import annotations
 
 import csv
+from dataclasses import dataclass
 from pathlib import Path
 
 
@@ -105,6 +106,30 @@ def wall_minutes(run_dir: Path) -> float | None:
             with (run_dir / table).open(newline="") as f:
                 times += [float(r["wall_time"]) for r in csv.DictReader(f) if r.get("wall_time")]
     return max(times) / 60 if times else None
+
+
+@dataclass(frozen=True)
+class TrainingEpisode:
+    """One training episode as ``train.csv`` logs it: the env steps it started and
+    ended at, and its return (noisy actions and warm-up included)."""
+
+    start: int
+    end: int
+    reward: float
+
+
+def training_episodes(run_dir: Path) -> list[TrainingEpisode]:
+    """A run's training episodes in order. ``train.csv`` writes one row per episode, at
+    its end, so each episode starts where the previous one ended."""
+    path = run_dir / "train.csv"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file (a run directory holds config.yaml "
+                                "and train.csv)")
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    ends = [int(float(row["env_step"])) for row in rows]
+    return [TrainingEpisode(start, end, float(row["episode_reward"]))
+            for start, end, row in zip([0] + ends[:-1], ends, rows)]
 
 
 def evaluation_share(run_dir: Path) -> float | None:
