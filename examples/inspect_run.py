@@ -27,13 +27,8 @@ import torch
 
 from agents.options import OptionError
 from agents.run import checkpoint
-from agents.run.config import RunOptions
-from agents.run.envs import make_gym_env
 from agents.run.td_invariants import bootstrapped_returns
 from agents.run.video import frames_per_second, write_video
-from agents.tdmpc.agent import TDMPCAgent
-from agents.tdmpc.replay import make_replay_buffer
-from geomdp_envs import symmetry_of
 
 
 def main() -> None:
@@ -47,18 +42,11 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     try:
-        options = RunOptions.from_run_dir(args.run_dir)
-    except OptionError as err:
+        run = checkpoint.restore_run(args.run_dir, render_mode="rgb_array" if args.video else None)
+    except (OptionError, checkpoint.CheckpointError) as err:
         raise SystemExit(str(err)) from None
+    options, env, agent, state = run.options, run.env, run.agent, run.state
     agent_cfg = options.agent
-    env = make_gym_env(options.env,
-                       render_mode="rgb_array" if args.video else None)
-    agent = TDMPCAgent(agent_cfg, symmetry_of(env), env.observation_space.shape[0],
-                       env.action_space.shape[0])
-    state = checkpoint.load(args.run_dir, agent, make_replay_buffer(
-        agent_cfg.replay, agent_cfg.horizon, agent_cfg.batch_size))
-    if state is None:
-        raise SystemExit(f"no checkpoint in {args.run_dir}")
     print(f"{args.run_dir}: agent at env step {state['env_step']}")
     discount = agent_cfg.loss.discount
     for episode in range(args.episodes):

@@ -2,6 +2,7 @@
 
     python scripts/before_reward.py untrained [--env pointmass3d] [--groups none octahedral icosahedral]
     python scripts/before_reward.py runs RUN_DIR [RUN_DIR ...]
+    python scripts/before_reward.py restored RUN_DIR [RUN_DIR ...]
 
 PointMass's target sits at the origin, the point every rotation and reflection fixes, and
 the ball starts at rest. With one ball, a G-equivariant policy's action at rest is then an
@@ -25,7 +26,12 @@ ball's line to the target (mean |cos|; 1: on the line, 0.5: a random direction i
 the untrained planner, whose zero-initialised reward and Q heads give every plan the same
 value). ``runs``: from committed runs' ``train.csv`` alone, the first training episode a
 run solved (return above ``--solved``) and the reward it had earned before it, in the
-warm-up and after: did it find the target before it had seen reward?
+warm-up and after: did it find the target before it had seen reward? ``restored``: agents
+as their runs' checkpoints left them (a run stopped where it matters, e.g. at the end of its
+warm-up and its burst of updates: ``train.steps`` = ``train.seed_steps``): the policy's
+alignment at rest, the planner's first action's (with training's exploration noise at the
+run's agent step) and the returns of each acting alone — does what the trainer acts with
+carry the policy's prior?
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ from scipy.stats import fisher_exact
 import geomdp_envs  # noqa: F401  (registers GeoMDP/*)
 from agents import TDMPCAgent, agent_config
 from agents.options import OptionError
+from agents.run import checkpoint
 from agents.run.config import RunOptions
 from agents.run.envs import make_gym_env
 from agents.run.presets import compose_config
@@ -65,13 +72,15 @@ def alignment(observations: np.ndarray, actions: np.ndarray, dim: int) -> np.nda
 
 
 def episode_return(env: gymnasium.Env, action_repeat: int, agent: TDMPCAgent, seed: int,
-                   planner: bool) -> float:
+                   planner: bool, step: int = 0) -> float:
+    """One episode acted by the planner as in training (exploration noise of agent step
+    ``step``'s schedule) or by the policy's mean action alone."""
     obs, _ = env.reset(seed=seed)
     agent.start_episode()
     total, done = 0.0, False
     while not done:
         o = torch.as_tensor(obs)
-        action = (agent.act(o, 0, explore=True) if planner else agent.policy_action(o)).numpy()
+        action = (agent.act(o, step, explore=True) if planner else agent.policy_action(o)).numpy()
         for _ in range(action_repeat):
             obs, reward, terminated, truncated, _ = env.step(action)
             total += reward
@@ -81,6 +90,25 @@ def episode_return(env: gymnasium.Env, action_repeat: int, agent: TDMPCAgent, se
     return total
 
 
+def start_states(env: gymnasium.Env, n: int) -> np.ndarray:
+    """The task's first ``n`` start states of a fixed set (seeds 10**6, 10**6 + 1, ...)."""
+    return np.array([env.reset(seed=10**6 + i)[0] for i in range(n)])
+
+
+def first_planned_actions(agent: TDMPCAgent, starts: np.ndarray, step: int) -> np.ndarray:
+    """The planner's first action of an episode from each start state, with training's
+    exploration noise at agent step ``step``."""
+    actions = []
+    for start in starts:
+        agent.start_episode()
+        actions.append(agent.act(torch.as_tensor(start), step, explore=True).numpy())
+    return np.array(actions)
+
+
+def cos_cell(cos: np.ndarray) -> str:
+    return f"|cos| {np.abs(cos).mean():.2f} cos {cos.mean():+.2f}"
+
+
 def untrained(args: argparse.Namespace) -> None:
     task = ([f"env.target_size={args.target_size}", f"env.n_balls={args.n_balls}"]
             if args.env == "pointmass3d" else [])
@@ -88,7 +116,7 @@ def untrained(args: argparse.Namespace) -> None:
                                                             resolve=True)).env
     env = make_gym_env(options)
     symmetry = symmetry_of(env)
-    starts = np.array([env.reset(seed=10**6 + i)[0] for i in range(args.starts)])
+    starts = start_states(env, args.starts)
     random_direction = 0.5 if symmetry.dim == 3 else 2 / math.pi
     arguments = f" {options.kwargs}" if options.kwargs else ""
     print(f"{args.env}{arguments}: {args.inits} untrained agents per group, "
@@ -109,7 +137,7 @@ def untrained(args: argparse.Namespace) -> None:
             cos = alignment(starts, agent.policy_action(torch.as_tensor(starts)).numpy(), symmetry.dim)
             heading["inward"] += cos.mean() > 0.5  # on average within 60 degrees of the way in
             heading["outward"] += cos.mean() < -0.5
-            cell = f"|cos| {np.abs(cos).mean():.2f} cos {cos.mean():+.2f}"
+            cell = cos_cell(cos)
             for mode in modes:
                 returns = [episode_return(env, options.action_repeat, agent, 1000 * init + e,
                                           mode == "planner")
@@ -176,6 +204,43 @@ def runs(args: argparse.Namespace) -> None:
               "(rough: runs of one seed share their warm-up)")
 
 
+def restored(args: argparse.Namespace) -> None:
+    summary = defaultdict(lambda: {"runs": 0, "policy": [], "planner": [],
+                                   "solved": {"policy": 0, "planner": 0}})
+    for run_dir in args.run_dirs:
+        try:
+            run = checkpoint.restore_run(run_dir)
+        except (OptionError, checkpoint.CheckpointError) as err:
+            raise SystemExit(str(err)) from None
+        if run.options.env.name not in TASKS:
+            raise SystemExit(f"{run_dir}: a run on {run.options.env.name!r}; this reads "
+                             f"{' and '.join(TASKS)} runs only")
+        dim, step = symmetry_of(run.env).dim, run.state["agent_step"]
+        starts = start_states(run.env, args.starts)
+        policy = alignment(starts, run.agent.policy_action(torch.as_tensor(starts)).numpy(), dim)
+        planner = alignment(starts, first_planned_actions(run.agent, starts, step), dim)
+        found = summary[agent_label(run.options)]
+        found["runs"] += 1
+        found["policy"].append(np.abs(policy).mean())
+        found["planner"].append(np.abs(planner).mean())
+        cells = []
+        for mode in ("policy", "planner"):
+            returns = [episode_return(run.env, run.options.env.action_repeat, run.agent, 10**7 + e,
+                                      mode == "planner", step) for e in range(args.episodes)]
+            found["solved"][mode] += sum(r > args.solved for r in returns)
+            cells.append(f"{mode} " + " ".join(f"{r:.0f}" for r in returns))
+        print(f"{run_dir} (env step {run.state['env_step']}): at rest, the policy {cos_cell(policy)}, "
+              f"the planner's first action {cos_cell(planner)}; returns " + ", ".join(cells),
+              flush=True)
+    for agent, found in summary.items():
+        episodes = found["runs"] * args.episodes
+        print(f"{agent}: {found['runs']} runs; mean |cos| at rest, policy "
+              f"{min(found['policy']):.2f}-{max(found['policy']):.2f}, planner's first action "
+              f"{min(found['planner']):.2f}-{max(found['planner']):.2f}; solved by the policy "
+              f"{found['solved']['policy']}/{episodes}, by the planner "
+              f"{found['solved']['planner']}/{episodes}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--solved", type=float, default=100.0,
@@ -193,9 +258,14 @@ def main() -> None:
     fresh.add_argument("--planner", action="store_true", help="also act with the untrained planner")
     logged = sub.add_parser("runs", help="committed runs: the first solved episode and the reward before it")
     logged.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR")
+    checkpointed = sub.add_parser("restored", help="agents from their runs' checkpoints (e.g. stopped "
+                                  "at the end of the warm-up: train.steps=train.seed_steps)")
+    checkpointed.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR")
+    checkpointed.add_argument("--starts", type=int, default=50, help="start states for the alignment")
+    checkpointed.add_argument("--episodes", type=int, default=4, help="episodes per run and mode")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    untrained(args) if args.command == "untrained" else runs(args)
+    {"untrained": untrained, "runs": runs, "restored": restored}[args.command](args)
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import importlib.util
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -13,9 +14,12 @@ import gymnasium
 import numpy as np
 import pytest
 import torch
+from conftest import TINY_AGENT
 from omegaconf import OmegaConf
 
 from agents import TDMPCAgent, agent_config
+from agents.cli.train import run
+from agents.run import checkpoint
 from agents.run.presets import compose_config
 from geomdp_envs import symmetry_of
 
@@ -97,3 +101,24 @@ def test_a_run_on_another_task_is_one_line(tmp_path):
     result = subprocess.run([sys.executable, str(SCRIPT), "runs", str(run)], capture_output=True, text=True)
     assert result.returncode != 0
     assert result.stderr.strip() == f"{run}: a run on 'reacher'; this reads PointMass runs only"
+
+
+def test_restored_agents_are_measured_as_their_checkpoints_left_them(tmp_path):
+    """``restored``: a D4 run stopped after its burst of updates; the policy's alignment it
+    prints is the restored agent's, and a run without a checkpoint is one line."""
+    path = tmp_path / "D4"
+    assert run(compose_config(["env.action_repeat=8", "train.steps=2000", "train.seed_steps=1000",
+                               "train.eval_every=2000", "agent.group=D4", *TINY_AGENT]), path) == 0
+    out = subprocess.run([sys.executable, str(SCRIPT), "restored", str(path), "--starts", "6",
+                          "--episodes", "1"], capture_output=True, text=True, check=True).stdout
+    restored = checkpoint.restore_run(path)
+    starts = before_reward.start_states(restored.env, 6)
+    cos = before_reward.alignment(starts, restored.agent.policy_action(torch.as_tensor(starts)).numpy(), 2)
+    line = f"{path} (env step 2000): at rest, the policy {before_reward.cos_cell(cos)}, the planner's"
+    assert line + " first action |cos| " in out
+    assert re.search(r"^D4: 1 runs; mean \|cos\| at rest, policy (\S+)-\1, planner's first action "
+                     r"\S+; solved by the policy [01]/1, by the planner [01]/1$", out, re.MULTILINE), out
+    (path / "checkpoint").rename(tmp_path / "elsewhere")
+    result = subprocess.run([sys.executable, str(SCRIPT), "restored", str(path)],
+                            capture_output=True, text=True)
+    assert result.returncode != 0 and result.stderr.strip().startswith(f"no checkpoint in {path} ")

@@ -52,6 +52,19 @@ def test_logs_without_a_checkpoint_start_over(tmp_path, straight):
     assert_same_logs(tmp_path, straight)
 
 
+def test_a_restored_run_is_the_agent_its_checkpoint_holds(straight, tmp_path):
+    """restore_run (examples/inspect_run.py, scripts/before_reward.py) rebuilds the run's
+    agent and task and loads the checkpoint into it: every saved tensor, the loop state."""
+    restored = checkpoint.restore_run(straight)
+    assert restored.state["env_step"] == 3000 and restored.options.seed == 1
+    saved = torch.load(straight / "checkpoint" / "agent.pt", weights_only=False)["agent"]
+    torch.testing.assert_close(restored.agent.state_dict(), saved, rtol=0, atol=0)
+    assert restored.env.observation_space.shape == (4,)  # PointMass2D: position, velocity
+    (tmp_path / "config.yaml").write_text((straight / "config.yaml").read_text())
+    with pytest.raises(checkpoint.CheckpointError, match=f"^no checkpoint in {tmp_path} "):
+        checkpoint.restore_run(tmp_path)
+
+
 def flip_byte(path):
     data = bytearray(path.read_bytes())
     data[len(data) // 2] ^= 0xFF

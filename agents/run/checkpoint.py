@@ -22,18 +22,23 @@ from __future__ import annotations
 import hashlib
 import json
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import gymnasium
 import numpy as np
 import torch
 from torchrl.data import TensorDictReplayBuffer
 
 from agents.run import faults
 from agents.run.checkpoint_state import checkpoint_paths
+from agents.run.config import RunOptions
+from agents.run.envs import make_gym_env
 from agents.run.nested import differences, with_added_later
 from agents.tdmpc.agent import TDMPCAgent
-from agents.tdmpc.replay import load_replay, save_replay
+from agents.tdmpc.replay import load_replay, make_replay_buffer, save_replay
+from geomdp_envs import symmetry_of
 
 FORMAT_VERSION = 3
 # A checkpoint inside a block of updates (its loop state has an ``unfinished_episode``):
@@ -165,3 +170,30 @@ def load(run_dir: Path, agent: TDMPCAgent, buffer: TensorDictReplayBuffer,
         torch.cuda.set_rng_state_all(saved["cuda_rng"])
     np.random.set_state(saved["numpy_rng"])
     return state
+
+
+@dataclass
+class RestoredRun:
+    """A run's agent as its last checkpoint left it, beside the run's task."""
+
+    options: RunOptions
+    env: gymnasium.Env
+    agent: TDMPCAgent
+    state: dict[str, Any]  # the loop state: env_step, agent_step (the schedules' step), ...
+
+
+def restore_run(run_dir: Path, render_mode: str | None = None) -> RestoredRun:
+    """The agent of ``run_dir`` from its checkpoint and the task it was trained on, to act
+    with or inspect (its replay buffer is read and dropped). An OptionError or a
+    CheckpointError in one line when the run has no readable options or checkpoint."""
+    options = RunOptions.from_run_dir(run_dir)
+    env = make_gym_env(options.env, render_mode=render_mode)
+    agent = TDMPCAgent(options.agent, symmetry_of(env), env.observation_space.shape[0],
+                       env.action_space.shape[0])
+    replay = options.agent.replay
+    state = load(run_dir, agent, make_replay_buffer(replay, options.agent.horizon,
+                                                    options.agent.batch_size))
+    if state is None:
+        raise CheckpointError(f"no checkpoint in {run_dir} (a run directory that geomdp-train "
+                              "has checkpointed)")
+    return RestoredRun(options, env, agent, state)
