@@ -224,21 +224,21 @@ def restored(args: argparse.Namespace) -> None:
         found["policy"].append(np.abs(policy).mean())
         found["planner"].append(np.abs(planner).mean())
         cells = []
-        for mode in ("policy", "planner"):
+        for mode in ("policy", "planner") if args.episodes else ():
             returns = [episode_return(run.env, run.options.env.action_repeat, run.agent, 10**7 + e,
                                       mode == "planner", step) for e in range(args.episodes)]
             found["solved"][mode] += sum(r > args.solved for r in returns)
             cells.append(f"{mode} " + " ".join(f"{r:.0f}" for r in returns))
         print(f"{run_dir} (env step {run.state['env_step']}): at rest, the policy {cos_cell(policy)}, "
-              f"the planner's first action {cos_cell(planner)}; returns " + ", ".join(cells),
-              flush=True)
+              f"the planner's first action {cos_cell(planner)}"
+              + ("; returns " + ", ".join(cells) if cells else ""), flush=True)
     for agent, found in summary.items():
         episodes = found["runs"] * args.episodes
         print(f"{agent}: {found['runs']} runs; mean |cos| at rest, policy "
               f"{min(found['policy']):.2f}-{max(found['policy']):.2f}, planner's first action "
-              f"{min(found['planner']):.2f}-{max(found['planner']):.2f}; solved by the policy "
-              f"{found['solved']['policy']}/{episodes}, by the planner "
-              f"{found['solved']['planner']}/{episodes}")
+              f"{min(found['planner']):.2f}-{max(found['planner']):.2f}"
+              + (f"; solved by the policy {found['solved']['policy']}/{episodes}, by the planner "
+                 f"{found['solved']['planner']}/{episodes}" if episodes else ""))
 
 
 def main() -> None:
@@ -262,7 +262,8 @@ def main() -> None:
                                   "at the end of the warm-up: train.steps=train.seed_steps)")
     checkpointed.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR")
     checkpointed.add_argument("--starts", type=int, default=50, help="start states for the alignment")
-    checkpointed.add_argument("--episodes", type=int, default=4, help="episodes per run and mode")
+    checkpointed.add_argument("--episodes", type=int, default=4,
+                              help="episodes per run and mode (0: the alignment only)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     {"untrained": untrained, "runs": runs, "restored": restored}[args.command](args)

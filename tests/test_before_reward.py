@@ -118,6 +118,9 @@ def test_restored_agents_are_measured_as_their_checkpoints_left_them(tmp_path):
     assert line + " first action |cos| " in out
     assert re.search(r"^D4: 1 runs; mean \|cos\| at rest, policy (\S+)-\1, planner's first action "
                      r"\S+; solved by the policy [01]/1, by the planner [01]/1$", out, re.MULTILINE), out
+    alignment_only = subprocess.run([sys.executable, str(SCRIPT), "restored", str(path), "--starts", "6",
+                                     "--episodes", "0"], capture_output=True, text=True, check=True).stdout
+    assert line in alignment_only and "returns" not in alignment_only and "solved" not in alignment_only
     (path / "checkpoint").rename(tmp_path / "elsewhere")
     result = subprocess.run([sys.executable, str(SCRIPT), "restored", str(path)],
                             capture_output=True, text=True)
