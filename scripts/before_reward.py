@@ -171,7 +171,8 @@ def agent_label(options: RunOptions) -> str:
 
 
 def runs(args: argparse.Namespace) -> None:
-    found = defaultdict(lambda: [0, 0, 0])  # agent: runs, solved at all, solved before EARNED
+    # agent: runs, solved at all, solved before EARNED, solved having earned exactly nothing
+    found = defaultdict(lambda: [0, 0, 0, 0])
     for run_dir in args.run_dirs:
         if not (run_dir / "train.csv").is_file():
             raise SystemExit(f"{run_dir / 'train.csv'}: no such file (RUN_DIR is a run's directory)")
@@ -187,11 +188,12 @@ def runs(args: argparse.Namespace) -> None:
             continue
         counts[1] += 1
         counts[2] += warm + after < EARNED
+        counts[3] += warm + after == 0
         print(f"{run_dir}: first solved episode {first + 1} of {episodes}; earned before it "
               f"{warm:.3g} in the warm-up, {after:.3g} after", flush=True)
-    for agent, (total, solved, early) in found.items():
+    for agent, (total, solved, early, blind) in found.items():
         print(f"{agent}: {total} runs, {solved} solved an episode, {early} of them before "
-              f"earning {EARNED:g} in all")
+              f"earning {EARNED:g} in all ({blind} having earned exactly 0)")
     # the prior is the untrained networks': augmented replay leaves them plain
     plain = [found[a] for a in found if a.startswith("plain")]
     equivariant = [found[a] for a in found if not a.startswith("plain")]

@@ -82,16 +82,21 @@ def test_the_first_solved_episode_and_the_reward_before_it(tmp_path):
     early = write_run(tmp_path / "icosahedral", "icosahedral", [0.25, 0.0, 0.5, 850.0, 900.0])
     late = write_run(tmp_path / "plain", "none", [0.0, 0.0, 40.0, 99.0, 300.0])
     never = write_run(tmp_path / "never", "none", [0.0, 3.0, 0.0], "agent.augment=auto")
+    blind = write_run(tmp_path / "blind", "octahedral", [0.0, 0.0, 0.0, 700.0])
     assert before_reward.first_solved(early, 2000, 100.0) == (3, 0.25, 0.5, 5)
-    out = subprocess.run([sys.executable, str(SCRIPT), "runs", str(early), str(late), str(never)],
+    out = subprocess.run([sys.executable, str(SCRIPT), "runs", str(early), str(late), str(never),
+                          str(blind)],
                          capture_output=True, text=True, check=True).stdout
     assert f"{early}: first solved episode 4 of 5; earned before it 0.25 in the warm-up, 0.5 after" in out
     assert f"{late}: first solved episode 5 of 5; earned before it 0 in the warm-up, 139 after" in out
     assert f"{never}: never solved in 3 episodes; earned 3 in the warm-up, 0 after" in out
-    assert "icosahedral: 1 runs, 1 solved an episode, 1 of them before earning 1 in all" in out
+    assert "icosahedral: 1 runs, 1 solved an episode, 1 of them before earning 1 in all (0 having " \
+        "earned exactly 0)" in out
     assert "plain: 1 runs, 1 solved an episode, 0 of them before earning 1 in all" in out
     assert "plain, auto augmentation: 1 runs, 0 solved an episode, 0 of them before" in out
-    assert "equivariant networks 1 of 1 runs, plain networks 0 of 2; Fisher's exact test p = 0.33" in out
+    assert "octahedral: 1 runs, 1 solved an episode, 1 of them before earning 1 in all (1 having " \
+        "earned exactly 0)" in out
+    assert "equivariant networks 2 of 2 runs, plain networks 0 of 2; Fisher's exact test p = 0.33" in out
 
 
 def test_a_run_on_another_task_is_one_line(tmp_path):
