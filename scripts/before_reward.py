@@ -203,7 +203,7 @@ def runs(args: argparse.Namespace) -> None:
         p = fisher_exact([[early, total - early], [plain_early, plain_total - plain_early]]).pvalue
         print(f"solved before earning {EARNED:g}: equivariant networks {early} of {total} runs, "
               f"plain networks {plain_early} of {plain_total}; Fisher's exact test p = {p:.2g} "
-              "(rough: runs of one seed share their warm-up)")
+              "(rough: the equivariant runs of one seed share their warm-up's random actions)")
 
 
 def restored(args: argparse.Namespace) -> None:
@@ -221,6 +221,8 @@ def restored(args: argparse.Namespace) -> None:
         starts = start_states(run.env, args.starts)
         policy = alignment(starts, run.agent.policy_action(torch.as_tensor(starts)).numpy(), dim)
         planner = alignment(starts, first_planned_actions(run.agent, starts, step), dim)
+        # 0.0 exactly: reward and Q heads still at their zero init, so every plan ties
+        flat = float(run.agent.value(torch.as_tensor(starts)).abs().max())
         found = summary[agent_label(run.options)]
         found["runs"] += 1
         found["policy"].append(np.abs(policy).mean())
@@ -232,7 +234,7 @@ def restored(args: argparse.Namespace) -> None:
             found["solved"][mode] += sum(r > args.solved for r in returns)
             cells.append(f"{mode} " + " ".join(f"{r:.0f}" for r in returns))
         print(f"{run_dir} (env step {run.state['env_step']}): at rest, the policy {cos_cell(policy)}, "
-              f"the planner's first action {cos_cell(planner)}"
+              f"the planner's first action {cos_cell(planner)}; max |V| at them {flat:.2g}"
               + ("; returns " + ", ".join(cells) if cells else ""), flush=True)
     for agent, found in summary.items():
         episodes = found["runs"] * args.episodes
