@@ -151,3 +151,30 @@ def test_the_agent_passes_straight_through_to_its_model() -> None:
         config = TDMPCConfig.from_dict({"networks": {"hidden_dim": 16, "latent_dim": 8},
                                         "loss": {"straight_through": flag}, "batch_size": 4})
         assert TDMPCAgent(config, None, 4, 2).model.straight_through is flag
+
+
+@pytest.mark.parametrize("group", ["none", "D4"])
+def test_without_reward_the_heads_stay_zero_and_any_reward_wakes_them(group: str) -> None:
+    """Before any reward TD-MPC's zero-initialised reward and Q heads stay exactly 0 (so
+    every plan ties); a reward of 1e-25 anywhere in the batch is enough to wake them:
+    Adam divides a gradient far below its eps (1e-8) by eps, a step of lr/eps = 1e5
+    times the gradient, so the heads grow about that much per update until their
+    gradients reach eps's scale (RESULTS.md, C4, "What acts is the planner")."""
+    from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
+
+    symmetry = gymnasium.make("GeoMDP/PointMass2D-v0").unwrapped.symmetry
+    batch = make_batch()
+    batch["next", "terminated"].zero_()
+    heads = {}
+    for reward in (0.0, 1e-25):
+        config = TDMPCConfig.from_dict({"group": group, "batch_size": BATCH, "networks": {
+            "hidden_dim": 32, "latent_dim": 16}})
+        agent = TDMPCAgent(config, symmetry, 4, 2, seed=0)
+        batch["next", "reward"].fill_(reward)
+        for _ in range(8):
+            agent.update(batch.exclude("priority_weight"))
+        obs = batch["observation"][:, 0]
+        heads[reward] = max(float(agent.value(obs).abs().max()), float(agent.predicted_reward(
+            obs, batch["action"][:, 0]).abs().max()))
+    assert heads[0.0] == 0.0
+    assert heads[1e-25] > 1e-6, heads  # 1e19 times the reward after 8 updates (measured: 6e-3, 9e-3)
