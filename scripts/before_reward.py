@@ -174,12 +174,15 @@ def runs(args: argparse.Namespace) -> None:
     # agent: runs, solved at all, solved before EARNED, solved having earned exactly nothing
     found = defaultdict(lambda: [0, 0, 0, 0])
     for run_dir in args.run_dirs:
-        if not (run_dir / "train.csv").is_file():
-            raise SystemExit(f"{run_dir / 'train.csv'}: no such file (RUN_DIR is a run's directory)")
-        options = RunOptions.from_run_dir(run_dir)
-        if not options.env.name.startswith("pointmass"):
-            raise SystemExit(f"{run_dir}: a run on {options.env.name!r}; this reads PointMass runs only")
-        first, warm, after, episodes = first_solved(run_dir, options.train.seed_steps, args.solved)
+        try:
+            options = RunOptions.from_run_dir(run_dir)
+            if not options.env.name.startswith("pointmass"):
+                raise SystemExit(f"{run_dir}: a run on {options.env.name!r}; this reads PointMass "
+                                 "runs only")
+            first, warm, after, episodes = first_solved(run_dir, options.train.seed_steps,
+                                                        args.solved)
+        except (OptionError, FileNotFoundError) as err:  # no config.yaml or train.csv
+            raise SystemExit(str(err)) from None
         counts = found[agent_label(options)]
         counts[0] += 1
         if first is None:

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import permutation_test
 
+from agents.options import OptionError
 from agents.run.config import RunOptions
 from agents.run.envs import make_gym_env, torchrl_env
 from agents.run.run_tables import training_episodes
@@ -155,10 +156,10 @@ def main() -> None:
     args = parser.parse_args()
     held = np.zeros(4, dtype=int)
     for run_dir in args.run_dirs:
-        for name in ("config.yaml", "train.csv"):
-            if not (run_dir / name).is_file():
-                raise SystemExit(f"{run_dir / name}: no such file (RUN_DIR is a run's directory)")
-        lines, counts = summary(run_dir, args.from_step, args.solved)
+        try:
+            lines, counts = summary(run_dir, args.from_step, args.solved)
+        except (OptionError, FileNotFoundError) as err:  # no config.yaml or train.csv
+            raise SystemExit(str(err)) from None
         print("\n".join(lines), flush=True)
         held += counts
     if len(args.run_dirs) > 1:

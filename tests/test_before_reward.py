@@ -108,6 +108,16 @@ def test_a_run_on_another_task_is_one_line(tmp_path):
     assert result.stderr.strip() == f"{run}: a run on 'reacher'; this reads PointMass runs only"
 
 
+
+@pytest.mark.parametrize("missing", ["config.yaml", "train.csv"])
+def test_a_run_directory_missing_a_file_is_one_line(tmp_path, missing):
+    run = write_run(tmp_path / "run", "none", [0.0])
+    (run / missing).unlink()
+    result = subprocess.run([sys.executable, str(SCRIPT), "runs", str(run)], capture_output=True, text=True)
+    assert result.returncode != 0
+    assert result.stderr.strip().startswith(f"{run / missing}: no such file (a run directory holds ")
+    assert len(result.stderr.strip().splitlines()) == 1
+
 def test_restored_agents_are_measured_as_their_checkpoints_left_them(tmp_path):
     """``restored``: a D4 run stopped after its burst of updates; the policy's alignment it
     prints is the restored agent's, and a run without a checkpoint is one line."""

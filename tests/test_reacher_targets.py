@@ -85,6 +85,16 @@ def test_a_run_on_another_task_is_one_line(reacher_run, tmp_path):
     assert result.stderr.strip() == f"{tmp_path}: a run on 'pointmass2d'; this reads Reacher runs only"
 
 
+
+@pytest.mark.parametrize("missing", ["config.yaml", "train.csv"])
+def test_a_run_directory_missing_a_file_is_one_line(reacher_run, tmp_path, missing):
+    for name in {"config.yaml", "train.csv"} - {missing}:
+        (tmp_path / name).write_text((reacher_run / name).read_text())
+    result = subprocess.run([sys.executable, str(SCRIPT), str(tmp_path)], capture_output=True, text=True)
+    assert result.returncode != 0
+    assert result.stderr.strip().startswith(f"{tmp_path / missing}: no such file (a run directory holds ")
+    assert len(result.stderr.strip().splitlines()) == 1
+
 def test_persistence_counts_the_second_half_in_the_first_halfs_holes():
     sector = np.array([0, 0, 1, 1, 0, 1, 0, 2])
     solved = np.array([False, False, True, False, True, True, False, False])

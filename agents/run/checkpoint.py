@@ -184,8 +184,10 @@ class RestoredRun:
 
 def restore_run(run_dir: Path, render_mode: str | None = None) -> RestoredRun:
     """The agent of ``run_dir`` from its checkpoint and the task it was trained on, to act
-    with or inspect (its replay buffer is read and dropped). An OptionError or a
-    CheckpointError in one line when the run has no readable options or checkpoint."""
+    with or inspect (its replay buffer is read and dropped). Like a resume, it also sets
+    torch's and numpy's global random states (and CUDA's, on a GPU) to those the checkpoint
+    saved: draws made after it depend on the run. An OptionError or a CheckpointError in
+    one line when the run has no readable options or checkpoint."""
     options = RunOptions.from_run_dir(run_dir)
     env = make_gym_env(options.env, render_mode=render_mode)
     agent = TDMPCAgent(options.agent, symmetry_of(env), env.observation_space.shape[0],
