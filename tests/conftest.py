@@ -1,4 +1,6 @@
 import os
+import sys
+from types import ModuleType
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 # One thread per test process: the tensors here are small, and beside training runs
@@ -19,6 +21,20 @@ def pytest_configure(config: pytest.Config) -> None:
     import torch
 
     torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
+
+
+def run_main(module: ModuleType, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture,
+             *args: object) -> tuple[str, str | None]:
+    """A script's ``main()`` with ``args`` as its command line, in this process (a
+    subprocess would spend seconds importing torch and escnn again): what it printed, and
+    the message it stopped with (``SystemExit``, as a user sees it), or None."""
+    monkeypatch.setattr(sys, "argv", [module.__name__, *map(str, args)])
+    try:
+        module.main()
+    except SystemExit as stop:
+        return capsys.readouterr().out, None if stop.code in (None, 0) else str(stop.code)
+    return capsys.readouterr().out, None
+
 
 # A tiny agent evaluated once per evaluation, quietly: the Hydra overrides a training
 # test adds to its task and budget (a run of a few thousand env steps takes seconds).

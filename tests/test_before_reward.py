@@ -6,15 +6,13 @@ from __future__ import annotations
 import csv
 import importlib.util
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import gymnasium
 import numpy as np
 import pytest
 import torch
-from conftest import TINY_AGENT
+from conftest import TINY_AGENT, run_main
 from omegaconf import OmegaConf
 
 from agents import TDMPCAgent, agent_config
@@ -78,15 +76,14 @@ def write_run(path: Path, group: str, returns: list[float], *overrides: str) -> 
     return path
 
 
-def test_the_first_solved_episode_and_the_reward_before_it(tmp_path):
+def test_the_first_solved_episode_and_the_reward_before_it(tmp_path, monkeypatch, capsys):
     early = write_run(tmp_path / "icosahedral", "icosahedral", [0.25, 0.0, 0.5, 850.0, 900.0])
     late = write_run(tmp_path / "plain", "none", [0.0, 0.0, 40.0, 99.0, 300.0])
     never = write_run(tmp_path / "never", "none", [0.0, 3.0, 0.0], "agent.augment=auto")
     blind = write_run(tmp_path / "blind", "octahedral", [0.0, 0.0, 0.0, 700.0])
     assert before_reward.first_solved(early, 2000, 100.0) == (3, 0.25, 0.5, 5)
-    out = subprocess.run([sys.executable, str(SCRIPT), "runs", str(early), str(late), str(never),
-                          str(blind)],
-                         capture_output=True, text=True, check=True).stdout
+    out, error = run_main(before_reward, monkeypatch, capsys, "runs", early, late, never, blind)
+    assert error is None
     assert f"{early}: first solved episode 4 of 5; earned before it 0.25 in the warm-up, 0.5 after" in out
     assert f"{late}: first solved episode 5 of 5; earned before it 0 in the warm-up, 139 after" in out
     assert f"{never}: never solved in 3 episodes; earned 3 in the warm-up, 0 after" in out
@@ -99,33 +96,31 @@ def test_the_first_solved_episode_and_the_reward_before_it(tmp_path):
     assert "equivariant networks 2 of 2 runs, plain networks 0 of 2; Fisher's exact test p = 0.33" in out
 
 
-def test_a_run_on_another_task_is_one_line(tmp_path):
+def test_a_run_on_another_task_is_one_line(tmp_path, monkeypatch, capsys):
     run = write_run(tmp_path / "run", "none", [0.0])
     config = (run / "config.yaml").read_text().replace("name: pointmass3d", "name: reacher", 1)
     (run / "config.yaml").write_text(config)
-    result = subprocess.run([sys.executable, str(SCRIPT), "runs", str(run)], capture_output=True, text=True)
-    assert result.returncode != 0
-    assert result.stderr.strip() == f"{run}: a run on 'reacher'; this reads PointMass runs only"
-
+    _, error = run_main(before_reward, monkeypatch, capsys, "runs", run)
+    assert error == f"{run}: a run on 'reacher'; this reads PointMass runs only"
 
 
 @pytest.mark.parametrize("missing", ["config.yaml", "train.csv"])
-def test_a_run_directory_missing_a_file_is_one_line(tmp_path, missing):
+def test_a_run_directory_missing_a_file_is_one_line(tmp_path, monkeypatch, capsys, missing):
     run = write_run(tmp_path / "run", "none", [0.0])
     (run / missing).unlink()
-    result = subprocess.run([sys.executable, str(SCRIPT), "runs", str(run)], capture_output=True, text=True)
-    assert result.returncode != 0
-    assert result.stderr.strip().startswith(f"{run / missing}: no such file (a run directory holds ")
-    assert len(result.stderr.strip().splitlines()) == 1
+    _, error = run_main(before_reward, monkeypatch, capsys, "runs", run)
+    assert error.startswith(f"{run / missing}: no such file (a run directory holds ") and "\n" not in error
 
-def test_restored_agents_are_measured_as_their_checkpoints_left_them(tmp_path):
+
+def test_restored_agents_are_measured_as_their_checkpoints_left_them(tmp_path, monkeypatch, capsys):
     """``restored``: a D4 run stopped after its burst of updates; the policy's alignment it
     prints is the restored agent's, and a run without a checkpoint is one line."""
     path = tmp_path / "D4"
     assert run(compose_config(["env.action_repeat=8", "train.steps=2000", "train.seed_steps=1000",
                                "train.eval_every=2000", "agent.group=D4", *TINY_AGENT]), path) == 0
-    out = subprocess.run([sys.executable, str(SCRIPT), "restored", str(path), "--starts", "6",
-                          "--episodes", "1"], capture_output=True, text=True, check=True).stdout
+    out, error = run_main(before_reward, monkeypatch, capsys, "restored", path, "--starts", 6,
+                          "--episodes", 1)
+    assert error is None
     restored = checkpoint.restore_run(path)
     starts = before_reward.start_states(restored.env, 6)
     cos = before_reward.alignment(starts, restored.agent.policy_action(torch.as_tensor(starts)).numpy(), 2)
@@ -133,10 +128,10 @@ def test_restored_agents_are_measured_as_their_checkpoints_left_them(tmp_path):
     assert line + " first action |cos| " in out
     assert re.search(r"^D4: 1 runs; mean \|cos\| at rest, policy (\S+)-\1, planner's first action "
                      r"\S+; solved by the policy [01]/1, by the planner [01]/1$", out, re.MULTILINE), out
-    alignment_only = subprocess.run([sys.executable, str(SCRIPT), "restored", str(path), "--starts", "6",
-                                     "--episodes", "0"], capture_output=True, text=True, check=True).stdout
+    alignment_only, error = run_main(before_reward, monkeypatch, capsys, "restored", path, "--starts", 6,
+                                     "--episodes", 0)
+    assert error is None
     assert line in alignment_only and "returns" not in alignment_only and "solved" not in alignment_only
     (path / "checkpoint").rename(tmp_path / "elsewhere")
-    result = subprocess.run([sys.executable, str(SCRIPT), "restored", str(path)],
-                            capture_output=True, text=True)
-    assert result.returncode != 0 and result.stderr.strip().startswith(f"no checkpoint in {path} ")
+    _, error = run_main(before_reward, monkeypatch, capsys, "restored", path)
+    assert error.startswith(f"no checkpoint in {path} ") and "\n" not in error

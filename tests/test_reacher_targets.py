@@ -5,14 +5,12 @@ from __future__ import annotations
 import csv
 import importlib.util
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from conftest import TINY_AGENT
+from conftest import TINY_AGENT, run_main
 
 from agents.cli.train import run
 from agents.run.presets import compose_config
@@ -50,7 +48,7 @@ def test_training_episodes_are_drawn_again_from_the_seed(reacher_run):
     assert starts.tolist() == [0, 1000, 2000]
 
 
-def test_success_by_direction_is_tabled_and_tested(reacher_run, tmp_path):
+def test_success_by_direction_is_tabled_and_tested(reacher_run, tmp_path, monkeypatch, capsys):
     """A train.csv whose episodes are solved exactly when the target lies in the upper
     half of the arena: the direction table shows it, the permutation test rejects
     independence."""
@@ -62,8 +60,8 @@ def test_success_by_direction_is_tabled_and_tested(reacher_run, tmp_path):
         writer = csv.writer(f)
         writer.writerow(["env_step", "episode", "episode_reward"])
         writer.writerows([1000 * (e + 1), e + 1, 500.0 if upper[e] else 3.0] for e in range(40))
-    out = subprocess.run([sys.executable, str(SCRIPT), str(tmp_path), "--from-step", "0"],
-                         capture_output=True, text=True, check=True).stdout
+    out, error = run_main(reacher_targets, monkeypatch, capsys, tmp_path, "--from-step", 0)
+    assert error is None
     assert f"episodes 0-39 (40), solved {upper.sum()} (return > 100)" in out
     assert "returns: solved from 500, the others up to 3" in out
     direction = next(line for line in out.splitlines() if "by direction:" in line)
@@ -76,24 +74,22 @@ def test_success_by_direction_is_tabled_and_tested(reacher_run, tmp_path):
     assert sum(int(total) for total in re.findall(r"\d+°? \d+/(\d+)", relative)) == 40, relative
 
 
-def test_a_run_on_another_task_is_one_line(reacher_run, tmp_path):
+def test_a_run_on_another_task_is_one_line(reacher_run, tmp_path, monkeypatch, capsys):
     config = (reacher_run / "config.yaml").read_text().replace("name: reacher", "name: pointmass2d", 1)
     (tmp_path / "config.yaml").write_text(config)
     (tmp_path / "train.csv").write_text("env_step,episode,episode_reward\n")
-    result = subprocess.run([sys.executable, str(SCRIPT), str(tmp_path)], capture_output=True, text=True)
-    assert result.returncode != 0
-    assert result.stderr.strip() == f"{tmp_path}: a run on 'pointmass2d'; this reads Reacher runs only"
-
+    _, error = run_main(reacher_targets, monkeypatch, capsys, tmp_path)
+    assert error == f"{tmp_path}: a run on 'pointmass2d'; this reads Reacher runs only"
 
 
 @pytest.mark.parametrize("missing", ["config.yaml", "train.csv"])
-def test_a_run_directory_missing_a_file_is_one_line(reacher_run, tmp_path, missing):
+def test_a_run_directory_missing_a_file_is_one_line(reacher_run, tmp_path, monkeypatch, capsys, missing):
     for name in {"config.yaml", "train.csv"} - {missing}:
         (tmp_path / name).write_text((reacher_run / name).read_text())
-    result = subprocess.run([sys.executable, str(SCRIPT), str(tmp_path)], capture_output=True, text=True)
-    assert result.returncode != 0
-    assert result.stderr.strip().startswith(f"{tmp_path / missing}: no such file (a run directory holds ")
-    assert len(result.stderr.strip().splitlines()) == 1
+    _, error = run_main(reacher_targets, monkeypatch, capsys, tmp_path)
+    assert error.startswith(f"{tmp_path / missing}: no such file (a run directory holds ")
+    assert "\n" not in error
+
 
 def test_persistence_counts_the_second_half_in_the_first_halfs_holes():
     sector = np.array([0, 0, 1, 1, 0, 1, 0, 2])

@@ -1,16 +1,16 @@
 """Interruptions, damaged checkpoints and bad run directories: nothing lost, one clear line."""
 
+import importlib.util
 import json
 import re
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import imageio.v2 as imageio
 import numpy as np
 import pytest
 import torch
+from conftest import run_main
 from test_train import config, rows
 
 from agents.cli.train import run
@@ -155,7 +155,7 @@ def test_run_directory_that_cannot_be_made_is_one_line(tmp_path, capsys):
     assert len(err) == 1 and "cannot create the run directory" in err[0]
 
 
-def test_evaluation_video_is_written_and_playable(tmp_path):
+def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys):
     assert run(config("train.steps=1000", "train.video=true", "train.video_every=2",
                       "+env.width=64", "+env.height=48"), tmp_path) == 0
     videos = sorted((tmp_path / "videos").glob("*.mp4"))
@@ -167,16 +167,17 @@ def test_evaluation_video_is_written_and_playable(tmp_path):
     assert frames[0].shape == (48, 64, 3)
     assert frames[0].std() > 0  # not a blank image
     # examples/inspect_run.py writes one from the checkpoint too
-    out = subprocess.run([sys.executable, str(ROOT / "examples/inspect_run.py"), str(tmp_path),
-                          "--episodes", "1", "--video", str(tmp_path / "replay.mp4")],
-                         capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
+    spec = importlib.util.spec_from_file_location("inspect_run", ROOT / "examples/inspect_run.py")
+    inspect_run = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(inspect_run)
+    planned, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1,
+                              "--video", tmp_path / "replay.mp4")
+    assert error is None
     assert sum(1 for _ in imageio.get_reader(tmp_path / "replay.mp4").iter_data()) == 126
     # and compares the agent's value estimate with the return, planning or with pi alone
-    policy = subprocess.run([sys.executable, str(ROOT / "examples/inspect_run.py"), str(tmp_path),
-                             "--episodes", "1", "--policy"], capture_output=True, text=True, timeout=300)
-    assert policy.returncode == 0, policy.stderr
-    for printed in (out.stdout, policy.stdout):
+    policy, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1, "--policy")
+    assert error is None
+    for printed in (planned, policy):
         values = re.search(r"Q\(s_0, pi\) (\S+) vs discounted return (\S+), mean over the "
                            r"episode (\S+) vs (\S+)$", printed, re.MULTILINE)
         assert values and all(np.isfinite(float(v)) for v in values.groups()), printed
