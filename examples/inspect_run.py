@@ -14,7 +14,10 @@ value overestimation, not a model the planner could trust. Then what the
 agent's reward model predicts for the episode's states and actions against the
 rewards earned: reward the model sees where there is none points at the model,
 an optimistic Q with a truthful reward model at the value. ``--video`` writes
-the first episode as an MP4 (rendered headless).
+the first episode as an MP4 (rendered headless). ``--evaluation`` starts episode
+i where every evaluation of the run started its episode i (the trainer's seeds,
+drawn as the trainer draws them), to look at the episodes its ``eval.csv``
+averages; the planner's noise is this replay's own, not the evaluation's.
 """
 
 from __future__ import annotations
@@ -27,7 +30,9 @@ import torch
 
 from agents.options import OptionError
 from agents.run import checkpoint
+from agents.run.envs import torchrl_env
 from agents.run.td_invariants import bootstrapped_returns
+from agents.run.trainer import evaluation_episode_seed
 from agents.run.video import frames_per_second, write_video
 
 
@@ -35,7 +40,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run_dir", type=Path)
     parser.add_argument("--episodes", type=int, default=4)
-    parser.add_argument("--seed", type=int, default=500)
+    parser.add_argument("--seed", type=int, default=500, help="episode i resets with seed SEED + i")
+    parser.add_argument("--evaluation", action="store_true",
+                        help="start from the run's evaluation start states instead (--seed unused)")
     parser.add_argument("--policy", action="store_true",
                         help="act with the learned policy's mean action instead of planning")
     parser.add_argument("--video", type=Path, default=None, help="write the first episode to this MP4")
@@ -49,8 +56,14 @@ def main() -> None:
     agent_cfg = options.agent
     print(f"{args.run_dir}: agent at env step {state['env_step']}")
     discount = agent_cfg.loss.discount
+    # resets env as the trainer does (TorchRL's seeding, then a reset)
+    trainer_env = torchrl_env(env, options.env.action_repeat) if args.evaluation else None
     for episode in range(args.episodes):
-        obs, _ = env.reset(seed=args.seed + episode)
+        if trainer_env is not None:
+            trainer_env.set_seed(evaluation_episode_seed(options.seed, episode))
+            obs = trainer_env.reset()["observation"].numpy()
+        else:
+            obs, _ = env.reset(seed=args.seed + episode)
         start, done, terminated = obs[:2].copy(), False, False
         values, rewards, observations, actions = [], [], [], []  # per agent step
         frames = [] if args.video and episode == 0 else None

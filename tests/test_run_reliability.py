@@ -174,6 +174,19 @@ def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys)
                               "--video", tmp_path / "replay.mp4")
     assert error is None
     assert sum(1 for _ in imageio.get_reader(tmp_path / "replay.mp4").iter_data()) == 126
+    # --evaluation starts where the run's evaluations started: the evaluation video's first
+    # frame again (the agent differs, so only the start state is shared); seed 500 does not
+    _, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1, "--evaluation",
+                        "--video", tmp_path / "evaluation.mp4")
+    assert error is None
+
+    def first_frame(path: Path) -> np.ndarray:
+        return next(imageio.get_reader(path).iter_data()).astype(float)
+
+    # the same image up to the video codec (8 of 255 at most, measured), against a mass
+    # elsewhere (183 where it moved)
+    assert np.abs(first_frame(tmp_path / "evaluation.mp4") - frames[0]).max() < 32
+    assert np.abs(first_frame(tmp_path / "replay.mp4") - frames[0]).max() > 100
     # and compares the agent's value estimate with the return, planning or with pi alone
     policy, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1, "--policy")
     assert error is None
