@@ -1,5 +1,7 @@
 import os
+import shutil
 import sys
+from pathlib import Path
 from types import ModuleType
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -23,6 +25,21 @@ def pytest_configure(config: pytest.Config) -> None:
     torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
 
 
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def load_script(path: str) -> ModuleType:
+    """A script of the repository (``scripts/…``, ``examples/…``: not in a package) as a
+    module, registered under its file name so that it can be pickled and imported again."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(Path(path).stem, ROOT / path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
 def run_main(module: ModuleType, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture,
              *args: object) -> tuple[str, str | None]:
     """A script's ``main()`` with ``args`` as its command line, in this process (a
@@ -34,6 +51,38 @@ def run_main(module: ModuleType, monkeypatch: pytest.MonkeyPatch, capsys: pytest
     except SystemExit as stop:
         return capsys.readouterr().out, None if stop.code in (None, 0) else str(stop.code)
     return capsys.readouterr().out, None
+
+
+@pytest.fixture(scope="session")
+def finished_run(tmp_path_factory: pytest.TempPathFactory, worker_id: str):
+    """``finished_run(cfg)``: the directory of a finished ``geomdp-train`` run of the composed
+    config ``cfg``, trained once per test session and shared by every test and pytest-xdist
+    worker that asks for the same config (the key is the whole config, so two requests share
+    a run only when the runs would be the same). Read it only: a test that changes a run
+    copies it first (``shutil.copytree``)."""
+    import fcntl
+    import hashlib
+
+    from omegaconf import OmegaConf
+
+    from agents.cli.train import run
+
+    root = tmp_path_factory.getbasetemp()
+    cache = (root if worker_id == "master" else root.parent) / "finished-runs"
+    cache.mkdir(exist_ok=True)
+
+    def get(cfg) -> Path:
+        key = hashlib.sha256(OmegaConf.to_yaml(cfg, resolve=True).encode()).hexdigest()[:16]
+        path, done = cache / key, cache / f"{key}.done"
+        with open(cache / f"{key}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # another worker making it: wait, then read
+            if not done.exists():
+                shutil.rmtree(path, ignore_errors=True)
+                assert run(cfg, path) == 0
+                done.touch()
+        return path
+
+    return get
 
 
 # A tiny agent evaluated once per evaluation, quietly: the Hydra overrides a training

@@ -4,7 +4,6 @@ target; the first solved episode and the reward earned before it, from train.csv
 from __future__ import annotations
 
 import csv
-import importlib.util
 import re
 from pathlib import Path
 
@@ -12,7 +11,7 @@ import gymnasium
 import numpy as np
 import pytest
 import torch
-from conftest import TINY_AGENT, run_main
+from conftest import TINY_AGENT, load_script, run_main
 from omegaconf import OmegaConf
 
 from agents import TDMPCAgent, agent_config
@@ -21,10 +20,7 @@ from agents.run import checkpoint
 from agents.run.presets import compose_config
 from geomdp_envs import symmetry_of
 
-SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "before_reward.py"
-SPEC = importlib.util.spec_from_file_location("before_reward", SCRIPT)
-before_reward = importlib.util.module_from_spec(SPEC)
-SPEC.loader.exec_module(before_reward)
+before_reward = load_script("scripts/before_reward.py")
 
 
 def test_alignment_is_the_cosine_with_each_balls_way_to_the_target():

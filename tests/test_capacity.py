@@ -1,11 +1,10 @@
 """Whether an equivariant agent's layers can carry the task's state (agents.nn.capacity,
 scripts/field_capacity.py, and geomdp-train's warning), counted for issue 38's N-ball agents."""
 
-import importlib.util
-from pathlib import Path
 
 import gymnasium
 import pytest
+from conftest import load_script
 from test_train import config
 
 import geomdp_envs  # noqa: F401  (registers the tasks)
@@ -15,10 +14,7 @@ from agents.nn.networks import Architecture, NetworkConfig
 
 pytestmark = pytest.mark.slow  # builds the icosahedral group (tests/conftest.py: LARGE_GROUPS)
 
-SPEC = importlib.util.spec_from_file_location(
-    "field_capacity", Path(__file__).resolve().parent.parent / "scripts" / "field_capacity.py")
-fc = importlib.util.module_from_spec(SPEC)
-SPEC.loader.exec_module(fc)
+fc = load_script("scripts/field_capacity.py")
 
 POINTMASS3D = "GeoMDP/PointMass3D-v0"
 VECTOR = (1,)  # escnn's id of the icosahedral and octahedral groups' vector irrep

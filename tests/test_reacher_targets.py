@@ -3,22 +3,17 @@
 from __future__ import annotations
 
 import csv
-import importlib.util
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from conftest import TINY_AGENT, run_main
+from conftest import TINY_AGENT, load_script, run_main
 
 from agents.cli.train import run
 from agents.run.presets import compose_config
 
-SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "reacher_targets.py"
-SPEC = importlib.util.spec_from_file_location("reacher_targets", SCRIPT)
-reacher_targets = importlib.util.module_from_spec(SPEC)
-SPEC.loader.exec_module(reacher_targets)
+reacher_targets = load_script("scripts/reacher_targets.py")
 
 # Three 1000-step Reacher episodes (125 agent steps), the first random, a tiny agent.
 TINY_REACHER = ["env=reacher", "env.difficulty=hard", "env.action_repeat=8", "seed=3",

@@ -1,18 +1,13 @@
 """scripts/replay_priorities.py reads a saved replay's zero-error slots and sampling mass."""
 
-import importlib.util
-from pathlib import Path
 
 import torch
-from conftest import run_main
+from conftest import load_script, run_main
 from tensordict import TensorDict
 
 from agents.tdmpc.replay import ReplayConfig, make_replay_buffer, save_replay
 
-SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "replay_priorities.py"
-SPEC = importlib.util.spec_from_file_location("replay_priorities", SCRIPT)
-replay_priorities = importlib.util.module_from_spec(SPEC)
-SPEC.loader.exec_module(replay_priorities)
+replay_priorities = load_script("scripts/replay_priorities.py")
 
 
 def test_counts_zero_error_slots_and_mass_per_part(tmp_path, monkeypatch, capsys):

@@ -5,7 +5,6 @@ without checkpoints and commit exactly them."""
 from __future__ import annotations
 
 import datetime as dt
-import importlib.util
 import os
 import shlex
 import signal
@@ -15,16 +14,13 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import load_script
 
 from agents.run.checkpoint_state import saved_step
 
 pytestmark = pytest.mark.slow  # runs stand-in trainers as subprocesses
 
-SPEC = importlib.util.spec_from_file_location(
-    "run_queue", Path(__file__).resolve().parent.parent / "scripts" / "run_queue.py")
-rq = importlib.util.module_from_spec(SPEC)
-sys.modules["run_queue"] = rq
-SPEC.loader.exec_module(rq)
+rq = load_script("scripts/run_queue.py")
 
 # A trainer with geomdp-train's contract: resumes from checkpoint/state.json, logs
 # eval.csv/train.csv/sessions.csv, checkpoints every step (atomically), and on SIGTERM

@@ -1,6 +1,5 @@
 """Interruptions, damaged checkpoints and bad run directories: nothing lost, one clear line."""
 
-import importlib.util
 import json
 import re
 import shutil
@@ -10,7 +9,7 @@ import imageio.v2 as imageio
 import numpy as np
 import pytest
 import torch
-from conftest import run_main
+from conftest import load_script, run_main
 from test_train import config, rows
 
 from agents.cli.train import run
@@ -29,12 +28,15 @@ def torchrl_steps(run_dir):
             for p in sorted((run_dir / "torchrl_csv").rglob("*.csv"))}
 
 
-@pytest.fixture(scope="module")
-def straight(tmp_path_factory):
+@pytest.fixture
+def straight(finished_run):
     """An uninterrupted 3000-step run, the reference for every resumed one."""
-    path = tmp_path_factory.mktemp("straight")
-    assert run(config("train.steps=3000"), path) == 0
-    return path
+    return finished_run(config("train.steps=3000"))
+
+
+def copy_of(run_dir: Path, destination: Path) -> Path:
+    """A finished run to change (the session's shared runs are read only)."""
+    return shutil.copytree(run_dir, destination, dirs_exist_ok=True)
 
 
 def assert_same_logs(run_dir, reference):
@@ -43,10 +45,10 @@ def assert_same_logs(run_dir, reference):
     assert torchrl_steps(run_dir) == torchrl_steps(reference)
 
 
-def test_logs_without_a_checkpoint_start_over(tmp_path, straight):
+def test_logs_without_a_checkpoint_start_over(tmp_path, straight, finished_run):
     """Killed before the first checkpoint, or the checkpoint deleted: the rerun starts
     over and its logs hold one run, not two."""
-    assert run(config("train.steps=2000"), tmp_path) == 0
+    copy_of(finished_run(config("train.steps=2000")), tmp_path)
     shutil.rmtree(tmp_path / "checkpoint")
     assert run(config("train.steps=3000"), tmp_path) == 0
     assert_same_logs(tmp_path, straight)
@@ -82,8 +84,9 @@ def truncate(path):
     (lambda c: (c / "replay.pt").unlink(), "missing replay.pt"),
     (lambda c: (c / "manifest.json").unlink(), "has no manifest.json"),
 ])
-def test_damaged_checkpoints_are_refused_in_one_line_and_kept(tmp_path, capsys, damage, message):
-    assert run(config(), tmp_path) == 0
+def test_damaged_checkpoints_are_refused_in_one_line_and_kept(tmp_path, capsys, finished_run,
+                                                              damage, message):
+    copy_of(finished_run(config()), tmp_path)
     damage(tmp_path / "checkpoint")
     before = sorted((p.name, p.stat().st_size) for p in (tmp_path / "checkpoint").rglob("*"))
     capsys.readouterr()
@@ -93,11 +96,10 @@ def test_damaged_checkpoints_are_refused_in_one_line_and_kept(tmp_path, capsys, 
     assert sorted((p.name, p.stat().st_size) for p in (tmp_path / "checkpoint").rglob("*")) == before
 
 
-def test_a_checkpoint_from_another_seed_is_refused(tmp_path, capsys):
-    assert run(config("seed=2"), tmp_path / "two") == 0
-    assert run(config("seed=1", "train.steps=1000"), tmp_path / "one") == 0
+def test_a_checkpoint_from_another_seed_is_refused(tmp_path, capsys, finished_run):
+    copy_of(finished_run(config("seed=1", "train.steps=1000")), tmp_path / "one")
     shutil.rmtree(tmp_path / "one/checkpoint")
-    shutil.copytree(tmp_path / "two/checkpoint", tmp_path / "one/checkpoint")
+    shutil.copytree(finished_run(config("seed=2")) / "checkpoint", tmp_path / "one/checkpoint")
     capsys.readouterr()
     assert run(config("seed=1", "train.steps=3000"), tmp_path / "one") == 2
     err = capsys.readouterr().err
@@ -130,9 +132,9 @@ def test_full_disk_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
     OSError(28, "No space left on device"),
     RuntimeError("[enforce fail at inline_container.cc] No space left on device")])
 def test_a_failed_checkpoint_write_is_one_line_and_keeps_the_last_one(tmp_path, capsys, monkeypatch,
-                                                                     error):
+                                                                     finished_run, error):
     """torch.save reports a full disk as OSError or RuntimeError: both are one line."""
-    assert run(config("train.steps=1000"), tmp_path) == 0
+    copy_of(finished_run(config("train.steps=1000")), tmp_path)
     step = json.loads((tmp_path / "checkpoint/state.json").read_text())["env_step"]
 
     def disk_full(*args, **kwargs):
@@ -167,9 +169,7 @@ def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys)
     assert frames[0].shape == (48, 64, 3)
     assert frames[0].std() > 0  # not a blank image
     # examples/inspect_run.py writes one from the checkpoint too
-    spec = importlib.util.spec_from_file_location("inspect_run", ROOT / "examples/inspect_run.py")
-    inspect_run = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(inspect_run)
+    inspect_run = load_script("examples/inspect_run.py")
     planned, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1,
                               "--video", tmp_path / "replay.mp4")
     assert error is None

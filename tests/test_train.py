@@ -107,11 +107,11 @@ def test_value_check_bootstraps_past_the_time_limit_only_and_leaves_the_agent_as
 
 
 @pytest.mark.slow
-def test_same_seed_gives_the_same_eval_csv(tmp_path):
-    for d in ("a", "b"):
-        assert run(config("seed=3"), tmp_path / d) == 0
-    assert rows(tmp_path / "a/eval.csv") == rows(tmp_path / "b/eval.csv")
-    assert rows(tmp_path / "a/train.csv") == rows(tmp_path / "b/train.csv")
+def test_same_seed_gives_the_same_eval_csv(tmp_path, finished_run):
+    """Here and in the session's shared run (made by this process or another worker's)."""
+    assert run(config(), tmp_path) == 0
+    for table in ("eval.csv", "train.csv"):
+        assert rows(tmp_path / table) == rows(finished_run(config()) / table), table
 
 
 def train_and_evaluations(run_dir, at_step: int) -> tuple[list[dict], list[dict]]:
@@ -124,7 +124,7 @@ def train_and_evaluations(run_dir, at_step: int) -> tuple[list[dict], list[dict]
 
 @pytest.mark.slow
 @pytest.mark.parametrize("group", ["none", "D8"])
-def test_separate_evaluation_noise_leaves_training_untouched(tmp_path, group):
+def test_separate_evaluation_noise_leaves_training_untouched(finished_run, group):
     """``train.eval_noise=separate``: evaluating every 1000 steps with no noisy episode, or
     every 2000 with one, gives the same training run and the same evaluation at 2000 (its
     generator is a function of seed and step); ``shared`` (the default) does not, since its
@@ -135,9 +135,8 @@ def test_separate_evaluation_noise_leaves_training_untouched(tmp_path, group):
     made = {}
     for noise in noises:
         for name, overrides in settings.items():
-            run_dir = tmp_path / f"{noise}-{name}"
-            assert run(config(f"agent.group={group}", f"train.eval_noise={noise}", *overrides),
-                       run_dir) == 0
+            run_dir = finished_run(config(f"agent.group={group}", f"train.eval_noise={noise}",
+                                          *overrides))
             made[noise, name] = train_and_evaluations(run_dir, at_step=2000)
     assert made["separate", "often"] == made["separate", "rarely"]
     assert len(made["separate", "often"][1]) == 1
@@ -154,34 +153,29 @@ AGENTS = {"plain": [], "D8": ["agent.group=D8"],
           # TD-MPC's replay priorities (both non-defaults): restored with the buffer
           "D8-tdmpc-priorities": ["agent.group=D8", "agent.replay.priority_eps=1e-6",
                                   "agent.replay.max_priority_within_buffer=true"]}
-KILLS = [("plain", "seeding:100"), ("plain", "evaluation:200"), ("plain", "checkpoint_write:1"),
-         ("plain", "checkpoint_cleanup:2"), ("D8", "update:100"), ("D8", "checkpoint_swap:1"),
-         ("octahedral-pointmass3d", "update:60"), ("SO3-pointmass3d", "update:60"),
-         ("O2-reacher", "checkpoint_swap:1"), ("plain-augmented", "update:100"),
-         ("D8-separate-evaluation", "evaluation:200"), ("D8-tdmpc-priorities", "update:100")]
-
-
-@pytest.fixture(scope="module")
-def uninterrupted(tmp_path_factory):
-    """One uninterrupted 2000-step run per agent, made when first asked for."""
-    made = {}
-
-    def get(agent):
-        if agent not in made:
-            path = tmp_path_factory.mktemp(agent)
-            assert run(config(*AGENTS[agent]), path) == 0
-            made[agent] = path
-        return made[agent]
-
-    return get
+# (agent, kill point, the env step the rerun resumes from). A TINY run: the warm-up episode
+# (actions 1-125), its 125 updates, the evaluation and checkpoint at 1000; the second episode
+# (actions and updates 126-250), the evaluation (evaluation actions 251-375) and checkpoint at
+# 2000. Every agent but the first case is killed after the first checkpoint, so that its
+# rerun restores the agent, optimiser, target network, replay and generators mid-run.
+KILLS = [("plain", "seeding:100", 0),  # before any checkpoint: the run starts over
+         ("plain", "checkpoint_write:2", 1000),  # a torn second checkpoint: the first stays
+         ("plain", "checkpoint_cleanup:2", 2000),  # the old one left beside the new
+         ("D8", "update:130", 1000),
+         ("octahedral-pointmass3d", "update:130", 1000), ("SO3-pointmass3d", "update:130", 1000),
+         ("O2-reacher", "checkpoint_swap:1", 1000),  # between the two renames of the second
+         ("plain-augmented", "update:130", 1000),
+         ("D8-separate-evaluation", "evaluation:300", 1000),
+         ("D8-tdmpc-priorities", "update:130", 1000)]
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("agent, kill_at", KILLS)
-def test_killed_run_resumes_to_the_same_result(tmp_path, uninterrupted, agent, kill_at):
+@pytest.mark.parametrize("agent, kill_at, resumed_at", KILLS)
+def test_killed_run_resumes_to_the_same_result(tmp_path, finished_run, agent, kill_at, resumed_at):
     """kill -9 at a chosen point (random seeding, an update, an evaluation, the middle
-    of a checkpoint write or swap); the same command then finishes the run, and the logs
-    equal an uninterrupted run's in every column but the wall-clock ones."""
+    of a checkpoint write or swap); the same command then finishes the run from the
+    checkpoint it should, and the logs equal an uninterrupted run's in every column but the
+    wall-clock ones."""
     args = [*TINY, *AGENTS[agent], f"hydra.run.dir={tmp_path}"]
     killed = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300,
                             env={**os.environ, "GEOMDP_KILL_AT": kill_at})
@@ -189,9 +183,9 @@ def test_killed_run_resumes_to_the_same_result(tmp_path, uninterrupted, agent, k
     finished = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300)
     assert finished.returncode == 0, finished.stderr[-2000:]
     for table in ("eval.csv", "train.csv"):
-        assert rows(tmp_path / table) == rows(uninterrupted(agent) / table), table
+        assert rows(tmp_path / table) == rows(finished_run(config(*AGENTS[agent])) / table), table
     sessions = rows(tmp_path / "sessions.csv")  # one row per start, kept across the resume
-    assert len(sessions) == 2 and sessions[0]["env_step"] == "0", sessions
+    assert [s["env_step"] for s in sessions] == ["0", str(resumed_at)], sessions
     assert not (tmp_path / "checkpoint.old").exists() and not (tmp_path / "checkpoint.tmp").exists()
 
 
@@ -200,38 +194,23 @@ def test_killed_run_resumes_to_the_same_result(tmp_path, uninterrupted, agent, k
 BURST = ["train.seed_steps=2000", "train.steps=3000", "train.checkpoint_every=250"]
 
 
-@pytest.fixture(scope="module")
-def uninterrupted_burst(tmp_path_factory):
-    """One uninterrupted run per agent with BURST's warm-up, checkpointed at episode ends only
-    (the default checkpoint_every, 1000, is an episode of TINY's)."""
-    made = {}
-
-    def get(agent):
-        if agent not in made:
-            made[agent] = tmp_path_factory.mktemp(f"burst-{agent}")
-            assert run(config(*AGENTS[agent], *BURST[:2]), made[agent]) == 0
-        return made[agent]
-
-    return get
-
-
 def checkpoint_format(run_dir):
     return json.loads((run_dir / "checkpoint/manifest.json").read_text())["format"]
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("agent, steps, kill_at, resumed_at", [
-    ("plain", 3000, "update:100", "96 of its 250"),
     ("D8", 3000, "update:100", "96 of its 250"),
     ("plain", 3000, "checkpoint_write:3", "32 of its 250"),  # killed writing the 2nd in the burst
     ("plain", 2000, "update:100", "96 of its 250")])  # the burst is the run's last episode
-def test_a_run_killed_inside_the_burst_resumes_from_its_middle(tmp_path, uninterrupted_burst,
+def test_a_run_killed_inside_the_burst_resumes_from_its_middle(tmp_path, finished_run,
                                                                 agent, steps, kill_at, resumed_at):
     """The burst of updates after the warm-up (TD-MPC's: 5000) is checkpointed every
     ``checkpoint_every`` env steps' worth of updates: killed inside it, a run resumes there,
     not at the burst's start, and its logs equal an uninterrupted run's (checkpointed at
-    episode ends only) in every column but the wall-clock ones. Code from before these
-    checkpoints would redo the whole burst: they have a format of their own, 4."""
+    episode ends only: the default checkpoint_every, 1000, is an episode of TINY's) in every
+    column but the wall-clock ones. Code from before these checkpoints would redo the whole
+    burst: they have a format of their own, 4."""
     args = [*TINY, *AGENTS[agent], *BURST, f"train.steps={steps}", f"hydra.run.dir={tmp_path}"]
     killed = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300,
                             env={**os.environ, "GEOMDP_KILL_AT": kill_at})
@@ -240,7 +219,7 @@ def test_a_run_killed_inside_the_burst_resumes_from_its_middle(tmp_path, uninter
     finished = subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=300)
     assert finished.returncode == 0, finished.stderr[-2000:]
     assert f"at env step 2000, {resumed_at} updates done" in finished.stdout, finished.stdout
-    reference = uninterrupted_burst(agent)
+    reference = finished_run(config(*AGENTS[agent], *BURST[:2]))
     for table in ("eval.csv", "train.csv"):
         expected = [r for r in rows(reference / table) if int(r["env_step"]) <= steps]
         assert rows(tmp_path / table) == expected, table
