@@ -58,8 +58,8 @@ def finished_run(tmp_path_factory: pytest.TempPathFactory, worker_id: str):
     """``finished_run(cfg)``: the directory of a finished ``geomdp-train`` run of the composed
     config ``cfg``, trained once per test session and shared by every test and pytest-xdist
     worker that asks for the same config (the key is the whole config, so two requests share
-    a run only when the runs would be the same). Read it only: a test that changes a run
-    copies it first (``shutil.copytree``)."""
+    a run only when the runs would be the same). Read it only; ``finished_run(cfg, copy_to=d)``
+    copies it into ``d`` for a test that changes it."""
     import fcntl
     import hashlib
 
@@ -71,7 +71,7 @@ def finished_run(tmp_path_factory: pytest.TempPathFactory, worker_id: str):
     cache = (root if worker_id == "master" else root.parent) / "finished-runs"
     cache.mkdir(exist_ok=True)
 
-    def get(cfg) -> Path:
+    def get(cfg, copy_to: Path | None = None) -> Path:
         key = hashlib.sha256(OmegaConf.to_yaml(cfg, resolve=True).encode()).hexdigest()[:16]
         path, done = cache / key, cache / f"{key}.done"
         with open(cache / f"{key}.lock", "w") as lock:
@@ -80,7 +80,7 @@ def finished_run(tmp_path_factory: pytest.TempPathFactory, worker_id: str):
                 shutil.rmtree(path, ignore_errors=True)
                 assert run(cfg, path) == 0
                 done.touch()
-        return path
+        return path if copy_to is None else shutil.copytree(path, copy_to, dirs_exist_ok=True)
 
     return get
 

@@ -43,7 +43,7 @@ def test_a_refused_resume_leaves_the_runs_records_untouched(tmp_path):
     assert {p: p.read_bytes() for p in records} == records
 
 
-def test_a_run_made_before_its_options_existed_resumes(tmp_path):
+def test_a_run_made_before_its_options_existed_resumes(tmp_path, finished_run):
     """A run directory and checkpoint from before ``agent.augment`` and TD-MPC's own choices
     (``agent.networks.layer_norm``, ...) existed resume (each option's no-op default is
     filled in: ``agents.run.nested.ADDED_LATER``)."""
@@ -53,7 +53,7 @@ def test_a_run_made_before_its_options_existed_resumes(tmp_path):
 
     from agents.run.nested import ADDED_LATER
 
-    assert run(config("train.steps=1000"), tmp_path) == 0
+    finished_run(config("train.steps=1000"), copy_to=tmp_path)
     saved = yaml.safe_load((tmp_path / "config.yaml").read_text())
     manifest = json.loads((tmp_path / "checkpoint/manifest.json").read_text())
     removed = [k for k in ADDED_LATER if k in manifest["options"]]
@@ -70,7 +70,7 @@ def test_a_run_made_before_its_options_existed_resumes(tmp_path):
     assert run(config("train.steps=2000"), tmp_path) == 0
 
 
-def test_every_option_newer_than_the_step_4_comparators_is_filled_in(tmp_path):
+def test_every_option_newer_than_the_step_4_comparators_is_filled_in(finished_run):
     """Issue 37's step 4 pairs new runs with rung 1's (commit daa8c48): every option a run
     records today that rung 1's config.yaml lacks has its no-op default in ADDED_LATER, so
     that geomdp-plot groups them by the options they were made with."""
@@ -78,8 +78,8 @@ def test_every_option_newer_than_the_step_4_comparators_is_filled_in(tmp_path):
 
     from agents.run.nested import ADDED_LATER, flatten
 
-    assert run(config("train.steps=1000"), tmp_path) == 0
-    today = flatten(yaml.safe_load((tmp_path / "config.yaml").read_text()))
+    run_dir = finished_run(config("train.steps=1000"))
+    today = flatten(yaml.safe_load((run_dir / "config.yaml").read_text()))
     rung1 = flatten(yaml.safe_load((REPO / "results/fidelity/rung1_schedule/plain/seed1/config.yaml")
                                    .read_text()))
     newer = {k for k in today if k not in rung1 and not k.startswith("env.")}

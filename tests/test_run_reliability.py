@@ -33,12 +33,6 @@ def straight(finished_run):
     """An uninterrupted 3000-step run, the reference for every resumed one."""
     return finished_run(config("train.steps=3000"))
 
-
-def copy_of(run_dir: Path, destination: Path) -> Path:
-    """A finished run to change (the session's shared runs are read only)."""
-    return shutil.copytree(run_dir, destination, dirs_exist_ok=True)
-
-
 def assert_same_logs(run_dir, reference):
     for table in LOGS:
         assert rows(run_dir / table) == rows(reference / table), table
@@ -48,7 +42,7 @@ def assert_same_logs(run_dir, reference):
 def test_logs_without_a_checkpoint_start_over(tmp_path, straight, finished_run):
     """Killed before the first checkpoint, or the checkpoint deleted: the rerun starts
     over and its logs hold one run, not two."""
-    copy_of(finished_run(config("train.steps=2000")), tmp_path)
+    finished_run(config("train.steps=2000"), copy_to=tmp_path)
     shutil.rmtree(tmp_path / "checkpoint")
     assert run(config("train.steps=3000"), tmp_path) == 0
     assert_same_logs(tmp_path, straight)
@@ -86,7 +80,7 @@ def truncate(path):
 ])
 def test_damaged_checkpoints_are_refused_in_one_line_and_kept(tmp_path, capsys, finished_run,
                                                               damage, message):
-    copy_of(finished_run(config()), tmp_path)
+    finished_run(config(), copy_to=tmp_path)
     damage(tmp_path / "checkpoint")
     before = sorted((p.name, p.stat().st_size) for p in (tmp_path / "checkpoint").rglob("*"))
     capsys.readouterr()
@@ -97,7 +91,7 @@ def test_damaged_checkpoints_are_refused_in_one_line_and_kept(tmp_path, capsys, 
 
 
 def test_a_checkpoint_from_another_seed_is_refused(tmp_path, capsys, finished_run):
-    copy_of(finished_run(config("seed=1", "train.steps=1000")), tmp_path / "one")
+    finished_run(config("seed=1", "train.steps=1000"), copy_to=tmp_path / "one")
     shutil.rmtree(tmp_path / "one/checkpoint")
     shutil.copytree(finished_run(config("seed=2")) / "checkpoint", tmp_path / "one/checkpoint")
     capsys.readouterr()
@@ -134,7 +128,7 @@ def test_full_disk_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
 def test_a_failed_checkpoint_write_is_one_line_and_keeps_the_last_one(tmp_path, capsys, monkeypatch,
                                                                      finished_run, error):
     """torch.save reports a full disk as OSError or RuntimeError: both are one line."""
-    copy_of(finished_run(config("train.steps=1000")), tmp_path)
+    finished_run(config("train.steps=1000"), copy_to=tmp_path)
     step = json.loads((tmp_path / "checkpoint/state.json").read_text())["env_step"]
 
     def disk_full(*args, **kwargs):
