@@ -54,7 +54,7 @@ def run_main(module: ModuleType, monkeypatch: pytest.MonkeyPatch, capsys: pytest
 
 
 @pytest.fixture(scope="session")
-def finished_run(tmp_path_factory: pytest.TempPathFactory, worker_id: str):
+def finished_run(tmp_path_factory: pytest.TempPathFactory):
     """``finished_run(cfg)``: the directory of a finished ``geomdp-train`` run of the composed
     config ``cfg``, trained once per test session and shared by every test and pytest-xdist
     worker that asks for the same config (the key is the whole config, so two requests share
@@ -63,15 +63,15 @@ def finished_run(tmp_path_factory: pytest.TempPathFactory, worker_id: str):
     import fcntl
     import hashlib
 
-    from omegaconf import OmegaConf
+    from omegaconf import DictConfig, OmegaConf
 
     from agents.cli.train import run
 
-    root = tmp_path_factory.getbasetemp()
-    cache = (root if worker_id == "master" else root.parent) / "finished-runs"
+    root = tmp_path_factory.getbasetemp()  # pytest-xdist: one per worker, in one session folder
+    cache = (root.parent if "PYTEST_XDIST_WORKER" in os.environ else root) / "finished-runs"
     cache.mkdir(exist_ok=True)
 
-    def get(cfg, copy_to: Path | None = None) -> Path:
+    def get(cfg: DictConfig, copy_to: Path | None = None) -> Path:
         key = hashlib.sha256(OmegaConf.to_yaml(cfg, resolve=True).encode()).hexdigest()[:16]
         path, done = cache / key, cache / f"{key}.done"
         with open(cache / f"{key}.lock", "w") as lock:
