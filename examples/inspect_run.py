@@ -1,11 +1,14 @@
 """Replay a trained run's agent from its checkpoint: where episodes end, and whether Q is right.
 
-    python examples/inspect_run.py results/pointmass2d_cpu/D8/seed2 [--episodes 4] [--policy] [--video a.mp4]
+    python examples/inspect_run.py results/pointmass2d_cpu/D8/seed2 [--episodes 4]
+        [--evaluation] [--policy | --explore] [--video a.mp4]
 
 Prints, per episode, the first two observation coordinates at the start and
 at the end (for PointMass2D: the mass's position) and the return, with the
-planner in evaluation mode (no exploration noise), or with the learned policy
-alone (``--policy``). Then the agent's value estimate against what it got:
+planner in evaluation mode (no exploration noise), with the training episodes'
+exploration noise (``--explore``: the noise schedule at the checkpoint's step, as
+the run's noisy evaluation episodes plan), or with the learned policy alone
+(``--policy``). Then the agent's value estimate against what it got:
 Q(s, pi(s)) at the first state, and averaged over the episode's states, beside
 the discounted return from there (``bootstrapped_returns``: rewards per agent
 step, the state after the time limit valued at the agent's own Q, as its TD
@@ -43,8 +46,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=500, help="episode i resets with seed SEED + i")
     parser.add_argument("--evaluation", action="store_true",
                         help="start from the run's evaluation start states instead (--seed unused)")
-    parser.add_argument("--policy", action="store_true",
+    acting = parser.add_mutually_exclusive_group()
+    acting.add_argument("--policy", action="store_true",
                         help="act with the learned policy's mean action instead of planning")
+    acting.add_argument("--explore", action="store_true",
+                        help="plan with the training episodes' exploration noise")
     parser.add_argument("--video", type=Path, default=None, help="write the first episode to this MP4")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -74,7 +80,7 @@ def main() -> None:
             obs_t = torch.as_tensor(obs)
             values.append(float(agent.value(obs_t)))
             action = (agent.policy_action(obs_t) if args.policy
-                      else agent.act(obs_t, state["agent_step"], explore=False)).numpy()
+                      else agent.act(obs_t, state["agent_step"], explore=args.explore)).numpy()
             observations.append(obs_t)
             actions.append(torch.as_tensor(action))
             rewards.append(0.0)

@@ -12,6 +12,7 @@ import torch
 from conftest import load_script, run_main
 from test_train import config, rows
 
+from agents import TDMPCAgent
 from agents.cli.train import run
 from agents.run import checkpoint
 from agents.run.presets import compose_config, sweep_dirname, usable_cores
@@ -181,6 +182,15 @@ def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys)
     # elsewhere (183 where it moved)
     assert np.abs(first_frame(tmp_path / "evaluation.mp4") - frames[0]).max() < 32
     assert np.abs(first_frame(tmp_path / "replay.mp4") - frames[0]).max() > 100
+    # --explore plans with the training noise (the planner is told so), --policy not at all
+    explored = []
+    act = TDMPCAgent.act
+    monkeypatch.setattr(TDMPCAgent, "act", lambda self, *args, explore, **kw:
+                        explored.append(explore) or act(self, *args, explore=explore, **kw))
+    for flag in ([], ["--explore"]):
+        _, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1, *flag)
+        assert error is None
+    assert explored == [False] * 125 + [True] * 125
     # and compares the agent's value estimate with the return, planning or with pi alone
     policy, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1, "--policy")
     assert error is None
