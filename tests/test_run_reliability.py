@@ -20,7 +20,6 @@ from agents.run.presets import compose_config, sweep_dirname, usable_cores
 pytestmark = pytest.mark.slow  # trains agents, kills and resumes them
 
 LOGS = ("eval.csv", "train.csv")
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def torchrl_steps(run_dir):

@@ -9,8 +9,6 @@ from conftest import load_script
 
 from agents.run.run_tables import added_columns, differing_tables
 
-SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
-
 
 def load(name: str):
     return load_script(f"scripts/{name}.py")
