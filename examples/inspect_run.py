@@ -1,7 +1,7 @@
 """Replay a trained run's agent from its checkpoint: where episodes end, and whether Q is right.
 
     python examples/inspect_run.py results/pointmass2d_cpu/D8/seed2 [--episodes 4]
-        [--evaluation] [--policy | --explore] [--video a.mp4]
+        [--evaluation] [--policy | --explore] [--rotate DEG] [--reflect] [--video a.mp4]
 
 Prints, per episode, the first two observation coordinates at the start and
 at the end (for PointMass2D: the mass's position) and the return, with the
@@ -21,6 +21,14 @@ the first episode as an MP4 (rendered headless). ``--evaluation`` starts episode
 i where every evaluation of the run started its episode i (the trainer's seeds,
 drawn as the trainer draws them), to look at the episodes its ``eval.csv``
 averages; the planner's noise is this replay's own, not the evaluation's.
+``--rotate DEG`` and ``--reflect`` move every start state by a group element before
+the episode (``transform_state``, as ``check_symmetry`` moves states): a rotation by DEG
+about the arena's vertical axis, after a reflection y -> -y. An exactly equivariant
+agent acts on the moved start as on the original, up to the planner's sampling noise,
+so where an episode fails this separates a start the agent cannot solve in any
+orientation from one that an approximately equivariant agent (D8 for O(2)) fails in
+some orientations only; an element outside the task's exact group (walls, joint limits)
+is said, as such a start may be one the task never draws.
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import gymnasium
 import numpy as np
 import torch
 
@@ -37,6 +46,42 @@ from agents.run.envs import torchrl_env
 from agents.run.td_invariants import bootstrapped_returns
 from agents.run.trainer import evaluation_episode_seed
 from agents.run.video import frames_per_second, write_video
+from geomdp_envs import groups
+
+
+def start_transform(env: gymnasium.Env, degrees: float | None, reflect: bool) -> np.ndarray | None:
+    """The orthogonal matrix ``--rotate``/``--reflect`` ask for (None: neither), after
+    checking that the task can move its state and that its group holds the element."""
+    if degrees is None and not reflect:
+        return None
+    task = env.unwrapped
+    if not hasattr(task, "transform_state"):
+        raise SystemExit(f"--rotate/--reflect: {type(task).__name__} cannot move its state by a "
+                         "group element (no transform_state); GeoMDP's tasks and declared "
+                         "MuJoCo tasks can")
+    symmetry = task.symmetry
+    angle = np.radians(degrees or 0.0)
+    rotation = (groups.rotation_2d(angle) if symmetry.dim == 2
+                else groups.rotation_3d(np.array([0.0, 0.0, 1.0]), angle))
+    flip = np.eye(symmetry.dim)
+    if reflect:
+        flip[1, 1] = -1.0
+    g = rotation @ flip
+    if not groups.contains(symmetry.continuous_group, g):
+        raise SystemExit(f"--reflect: the task is symmetric under {symmetry.continuous_group}, "
+                         "which has no reflections; valid: --rotate alone")
+    exact = ("" if groups.contains(symmetry.exact_group, g)
+             else f"; not in the task's exact group {symmetry.exact_group}")
+    print(f"start states moved by: rotation {degrees or 0.0:g} deg"
+          f"{' after reflection y -> -y' if reflect else ''}{exact}")
+    return g
+
+
+def moved_start(env: gymnasium.Env, g: np.ndarray) -> np.ndarray:
+    """Move the env's current (start) state by ``g``; the observation there."""
+    task = env.unwrapped
+    task.set_state(task.transform_state(task.get_state(), g))
+    return task.observe().astype(env.observation_space.dtype)
 
 
 def main() -> None:
@@ -51,6 +96,10 @@ def main() -> None:
                         help="act with the learned policy's mean action instead of planning")
     acting.add_argument("--explore", action="store_true",
                         help="plan with the training episodes' exploration noise")
+    parser.add_argument("--rotate", type=float, default=None, metavar="DEG",
+                        help="rotate every start state by DEG degrees (about the vertical axis in 3D)")
+    parser.add_argument("--reflect", action="store_true",
+                        help="reflect every start state y -> -y (before --rotate)")
     parser.add_argument("--video", type=Path, default=None, help="write the first episode to this MP4")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -61,6 +110,7 @@ def main() -> None:
     options, env, agent, state = run.options, run.env, run.agent, run.state
     agent_cfg = options.agent
     print(f"{args.run_dir}: agent at env step {state['env_step']}")
+    transform = start_transform(env, args.rotate, args.reflect)
     discount = agent_cfg.loss.discount
     # resets env as the trainer does (TorchRL's seeding, then a reset)
     trainer_env = torchrl_env(env, options.env.action_repeat) if args.evaluation else None
@@ -70,6 +120,8 @@ def main() -> None:
             obs = trainer_env.reset()["observation"].numpy()
         else:
             obs, _ = env.reset(seed=args.seed + episode)
+        if transform is not None:
+            obs = moved_start(env, transform)
         start, done, terminated = obs[:2].copy(), False, False
         values, rewards, observations, actions = [], [], [], []  # per agent step
         frames = [] if args.video and episode == 0 else None

@@ -200,6 +200,27 @@ def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys)
         rewards = re.search(r"reward model: (\S+) predicted over the episode vs (\S+) earned; "
                             r"at the steps that earned nothing (\S+)$", printed, re.MULTILINE)
         assert rewards and all(np.isfinite(float(v)) for v in rewards.groups()), printed
+    # --rotate/--reflect move each start state by a group element before the episode: on
+    # PointMass2D the observation starts with the mass's position, so the printed start is
+    # the original one moved by g; an element outside the task's exact group (D4: the
+    # arena's walls) is said
+    def start(*flags: str) -> tuple[str, np.ndarray]:
+        printed, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1,
+                                  "--policy", *flags)
+        assert error is None
+        found = re.search(r"episode 0: start \[\s*(\S+)\s+(\S+)\]", printed)
+        return printed, np.array(found.groups(), dtype=float)
+
+    _, (x, y) = start()
+    assert abs(x) > 0.01 and abs(y) > 0.01 and abs(abs(x) - abs(y)) > 0.01  # g moves it
+    rotated_printed, rotated = start("--rotate", "90")
+    assert "rotation 90 deg" in rotated_printed and "exact group" not in rotated_printed
+    np.testing.assert_allclose(rotated, [-y, x], atol=2e-3)
+    np.testing.assert_allclose(start("--reflect")[1], [x, -y], atol=2e-3)
+    both_printed, both = start("--rotate", "30", "--reflect")
+    assert "not in the task's exact group D4" in both_printed
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    np.testing.assert_allclose(both, [c * x + s * y, s * x - c * y], atol=2e-3)
 
 
 def test_sweep_directories_stay_short_and_the_launcher_uses_one_process_per_core():
