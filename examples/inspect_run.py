@@ -1,7 +1,8 @@
 """Replay a trained run's agent from its checkpoint: where episodes end, and whether Q is right.
 
     python examples/inspect_run.py results/pointmass2d_cpu/D8/seed2 [--episodes 4]
-        [--evaluation] [--policy | --explore] [--rotate DEG] [--reflect] [--video a.mp4]
+        [--evaluation] [--only I ...] [--policy | --explore] [--rotate DEG] [--reflect]
+        [--video a.mp4]
 
 Prints, per episode, the first two observation coordinates at the start and
 at the end (for PointMass2D: the mass's position) and the return, with the
@@ -88,6 +89,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run_dir", type=Path)
     parser.add_argument("--episodes", type=int, default=4)
+    parser.add_argument("--only", type=int, nargs="+", metavar="I", default=None,
+                        help="replay only these episodes (numbered as --episodes counts them: "
+                             "evaluation episode I, or seed SEED + I); --episodes unused")
     parser.add_argument("--seed", type=int, default=500, help="episode i resets with seed SEED + i")
     parser.add_argument("--evaluation", action="store_true",
                         help="start from the run's evaluation start states instead (--seed unused)")
@@ -114,7 +118,10 @@ def main() -> None:
     discount = agent_cfg.loss.discount
     # resets env as the trainer does (TorchRL's seeding, then a reset)
     trainer_env = torchrl_env(env, options.env.action_repeat) if args.evaluation else None
-    for episode in range(args.episodes):
+    episodes = args.only if args.only is not None else list(range(args.episodes))
+    if any(episode < 0 for episode in episodes):
+        raise SystemExit(f"--only {' '.join(map(str, episodes))}: episode numbers start at 0")
+    for episode in episodes:
         if trainer_env is not None:
             trainer_env.set_seed(evaluation_episode_seed(options.seed, episode))
             obs = trainer_env.reset()["observation"].numpy()
@@ -124,7 +131,7 @@ def main() -> None:
             obs = moved_start(env, transform)
         start, done, terminated = obs[:2].copy(), False, False
         values, rewards, observations, actions = [], [], [], []  # per agent step
-        frames = [] if args.video and episode == 0 else None
+        frames = [] if args.video and episode == episodes[0] else None
         agent.start_episode()
         while not done:
             if frames is not None:

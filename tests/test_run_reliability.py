@@ -204,12 +204,17 @@ def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys)
     # PointMass2D the observation starts with the mass's position, so the printed start is
     # the original one moved by g; an element outside the task's exact group (D4: the
     # arena's walls) is said
-    def start(*flags: str) -> tuple[str, np.ndarray]:
+    def start(*flags: str, episode: int = 0) -> tuple[str, np.ndarray]:
         printed, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1,
                                   "--policy", *flags)
         assert error is None
-        found = re.search(r"episode 0: start \[\s*(\S+)\s+(\S+)\]", printed)
+        found = re.search(rf"episode {episode}: start \[\s*(\S+)\s+(\S+)\]", printed)
         return printed, np.array(found.groups(), dtype=float)
+
+    # --only replays the episodes it names, from the starts they have in the full sequence
+    _, second = start("--episodes", "2", episode=1)
+    only_printed, only = start("--only", "1", episode=1)
+    assert "episode 0:" not in only_printed and np.array_equal(only, second)
 
     _, (x, y) = start()
     assert abs(x) > 0.01 and abs(y) > 0.01 and abs(abs(x) - abs(y)) > 0.01  # g moves it
