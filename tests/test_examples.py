@@ -1,9 +1,16 @@
+import dataclasses
 import re
 import runpy
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
+import gymnasium
+import numpy as np
 import pytest
+from conftest import load_script
+
+import geomdp_envs  # noqa: F401  (registers the tasks)
 
 pytestmark = pytest.mark.slow  # runs the examples (SAC training, the demo)
 
@@ -37,3 +44,32 @@ def test_demo_runs_every_task(capsys):
     out = capsys.readouterr().out
     assert out.count("random-policy return") == len(demo.DEMO_TASKS)
     assert "exact group   PASS" in out and "exact group   FAIL" not in out
+
+
+def test_inspect_run_moves_start_states_by_the_element_it_names(capsys):
+    """examples/inspect_run.py --rotate/--reflect in 3D (the Reacher replays use 2D): the
+    element is the rotation about the vertical axis after y -> -y, the moved start is what
+    the task's declaration says g does to the observation, and an impossible request fails
+    with one line naming the valid choice."""
+    inspect_run = load_script("examples/inspect_run.py")
+    assert inspect_run.start_transform(None, None, False) is None  # neither flag: no element
+    env = gymnasium.make("GeoMDP/PointMass3D-v0", n_balls=2)
+    obs, _ = env.reset(seed=3)
+    g = inspect_run.start_transform(env, 90.0, True)
+    np.testing.assert_allclose(g, [[0, 1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-12)
+    assert "rotation 90 deg after reflection y -> -y" in capsys.readouterr().out
+    moved = inspect_run.moved_start(env, g)
+    assert moved.dtype == obs.dtype and not np.allclose(moved, obs)
+    expected = env.unwrapped.symmetry.observation_matrix(g) @ obs.astype(float)
+    np.testing.assert_allclose(moved, expected, atol=1e-6)
+
+    # a task symmetric under SO(3) only has no reflection to replay
+    rotations_only = SimpleNamespace(transform_state=env.unwrapped.transform_state,
+                                     symmetry=dataclasses.replace(env.unwrapped.symmetry,
+                                                                  continuous_group="SO(3)",
+                                                                  exact_group="SO(3)"))
+    rotations_only.unwrapped = rotations_only
+    with pytest.raises(SystemExit, match=r"no reflections; valid: --rotate alone"):
+        inspect_run.start_transform(rotations_only, None, True)
+    with pytest.raises(SystemExit, match=r"cannot move its state by a group element"):
+        inspect_run.start_transform(gymnasium.make("CartPole-v1"), 10.0, False)
