@@ -5,7 +5,9 @@
         [--video a.mp4]
 
 Prints, per episode, the first two observation coordinates at the start and
-at the end (for PointMass2D: the mass's position) and the return, with the
+at the end (for PointMass2D: the mass's position), how far each rewarded body is
+from its target at the start and at the end (the finger on Reacher, every ball on
+PointMass3D: which balls an N-ball agent brings in), and the return, with the
 planner in evaluation mode (no exploration noise), with the training episodes'
 exploration noise (``--explore``: the noise schedule at the checkpoint's step, as
 the run's noisy evaluation episodes plan), or with the learned policy alone
@@ -85,6 +87,23 @@ def moved_start(env: gymnasium.Env, g: np.ndarray) -> np.ndarray:
     return task.observe().astype(env.observation_space.dtype)
 
 
+def distances_to_target(env: gymnasium.Env) -> np.ndarray | None:
+    """Each rewarded body's distance to its target, where the task says it (GeoMDP's do)."""
+    distances = getattr(env.unwrapped, "distances_to_target", None)
+    return None if distances is None else distances()
+
+
+def distance_change(start: np.ndarray | None, end: np.ndarray | None) -> str:
+    """`` distance to target 0.21 -> 0.004`` (one per ball), or nothing for a task without."""
+    if start is None or end is None:
+        return ""
+    return f" distance to target {rounded(start)} -> {rounded(end)}"
+
+
+def rounded(distances: np.ndarray) -> str:
+    return f"{distances[0]:.3f}" if len(distances) == 1 else str(np.round(distances, 3))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run_dir", type=Path)
@@ -130,6 +149,7 @@ def main() -> None:
         if transform is not None:
             obs = moved_start(env, transform)
         start, done, terminated = obs[:2].copy(), False, False
+        start_distances = distances_to_target(env)
         values, rewards, observations, actions = [], [], [], []  # per agent step
         frames = [] if args.video and episode == episodes[0] else None
         agent.start_episode()
@@ -151,7 +171,8 @@ def main() -> None:
                     break
         final_value = 0.0 if terminated else float(agent.value(torch.as_tensor(obs)))
         returns = bootstrapped_returns(rewards, discount, final_value)
-        print(f"episode {episode}: start {np.round(start, 3)} end {np.round(obs[:2], 3)} "
+        print(f"episode {episode}: start {np.round(start, 3)} end {np.round(obs[:2], 3)}"
+              f"{distance_change(start_distances, distances_to_target(env))}; "
               f"return {sum(rewards):.1f}; Q(s_0, pi) {values[0]:.1f} vs discounted return "
               f"{returns[0]:.1f}, mean over the episode {np.mean(values):.1f} vs {np.mean(returns):.1f}")
         predicted = agent.predicted_reward(torch.stack(observations), torch.stack(actions)).cpu().numpy()

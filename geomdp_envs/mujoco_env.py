@@ -135,6 +135,12 @@ class GeometricMujocoEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     def _reward(self) -> float:
         raise NotImplementedError
 
+    def distances_to_target(self) -> np.ndarray:
+        """How far each body that earns reward (the mass, the finger, every ball) is from
+        where it earns it: the reward's own distances, shape (bodies,). ``reset`` and
+        ``step`` return them as ``info["distance_to_target"]``."""
+        raise NotImplementedError
+
     def _set_task_state(self, task: dict[str, np.ndarray]) -> None:
         """Write task parameters (e.g. a target position) into the model."""
 
@@ -162,13 +168,16 @@ class GeometricMujocoEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         mujoco.mj_resetData(self.model, self.data)
         self._initialize_episode(self.np_random)
         self._forward()
-        return self._observation().astype(np.float32), {}
+        return self._observation().astype(np.float32), self._info()
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         self.data.ctrl[:] = self._validated_action(action)
         self._physics_step()
         obs = self._observation().astype(np.float32)
-        return obs, float(self._reward()), False, False, {}
+        return obs, float(self._reward()), False, False, self._info()
+
+    def _info(self) -> dict[str, Any]:
+        return {"distance_to_target": self.distances_to_target()}
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:

@@ -61,6 +61,26 @@ def test_pointmass3d_reward_averages_the_balls():
     assert reward == pytest.approx(0.5, abs=1e-3)
 
 
+@pytest.mark.parametrize("config", TASK_CONFIGS)
+def test_info_says_how_far_each_rewarded_body_is_from_its_target(config):
+    """info["distance_to_target"], checked against the observation: the point masses'
+    targets are at the origin, Reacher observes the finger-to-target vector last."""
+    env_id, kwargs = config
+    env = gymnasium.make(env_id, **kwargs)
+    env.action_space.seed(0)
+    obs, info = env.reset(seed=1)
+    for _ in range(5):
+        if env_id.startswith("GeoMDP/Reacher"):
+            expected = [np.linalg.norm(obs[-2:])]
+        else:
+            dim = 2 if "PointMass2D" in env_id else 3
+            n_bodies = kwargs.get("n_balls", 1)
+            expected = np.linalg.norm(obs[:dim * n_bodies].reshape(n_bodies, dim), axis=1)
+        assert info["distance_to_target"].shape == (len(expected),)
+        np.testing.assert_allclose(info["distance_to_target"], expected, rtol=1e-5, atol=1e-6)
+        obs, _, _, _, info = env.step(env.action_space.sample())
+
+
 def test_reacher_target_sizes_and_frames():
     hard = gymnasium.make("GeoMDP/Reacher-v0", difficulty="hard", frame="global").unwrapped
     assert hard.model.geom("target").size[0] == 0.015

@@ -46,6 +46,21 @@ def test_demo_runs_every_task(capsys):
     assert "exact group   PASS" in out and "exact group   FAIL" not in out
 
 
+def test_inspect_run_prints_each_balls_distance_to_the_target():
+    """examples/inspect_run.py's distances: one number for one body, one per ball for N,
+    nothing for a task that does not say them."""
+    inspect_run = load_script("examples/inspect_run.py")
+    assert inspect_run.distance_change(np.array([0.2]), np.array([0.0041])) == (
+        " distance to target 0.200 -> 0.004")
+    assert inspect_run.distance_change(np.array([0.2, 0.15]), np.array([0.002, 0.19])) == (
+        " distance to target [0.2  0.15] -> [0.002 0.19 ]")
+    assert inspect_run.distance_change(None, None) == ""
+    env = gymnasium.make("GeoMDP/PointMass3D-v0", n_balls=3)
+    env.reset(seed=0)
+    assert inspect_run.distances_to_target(env).shape == (3,)
+    assert inspect_run.distances_to_target(gymnasium.make("CartPole-v1")) is None
+
+
 def test_inspect_run_moves_start_states_by_the_element_it_names(capsys):
     """examples/inspect_run.py --rotate/--reflect in 3D (the Reacher replays use 2D): the
     element is the rotation about the vertical axis after y -> -y, the moved start is what

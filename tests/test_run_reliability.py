@@ -216,8 +216,12 @@ def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys)
     only_printed, only = start("--only", "1", episode=1)
     assert "episode 0:" not in only_printed and np.array_equal(only, second)
 
-    _, (x, y) = start()
+    printed, (x, y) = start()
     assert abs(x) > 0.01 and abs(y) > 0.01 and abs(abs(x) - abs(y)) > 0.01  # g moves it
+    # how far the mass is from the target (at the origin) at the start and the end
+    distances = re.search(r"episode 0: start .* distance to target (\S+) -> (\S+); return", printed)
+    assert distances, printed
+    assert float(distances.group(1)) == pytest.approx(np.hypot(x, y), abs=2e-3)
     rotated_printed, rotated = start("--rotate", "90")
     assert "rotation 90 deg" in rotated_printed and "exact group" not in rotated_printed
     np.testing.assert_allclose(rotated, [-y, x], atol=2e-3)

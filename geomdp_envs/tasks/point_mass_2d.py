@@ -48,8 +48,12 @@ class PointMass2DEnv(GeometricMujocoEnv):
     def _observation(self) -> np.ndarray:
         return np.concatenate([self.data.qpos, self.data.qvel])
 
+    def distances_to_target(self) -> np.ndarray:
+        return np.array([np.linalg.norm(self.data.geom("target").xpos
+                                        - self.data.geom("pointmass").xpos)])
+
     def _reward(self) -> float:
-        distance = np.linalg.norm(self.data.geom("target").xpos - self.data.geom("pointmass").xpos)
+        distance = self.distances_to_target()[0]
         near_target = dmc.tolerance(distance, bounds=(0, self._target_size),
                                     margin=self._target_size)
         return float(near_target * dmc.control_reward(self.data.ctrl))

@@ -133,8 +133,11 @@ class PointMass3DEnv(GeometricMujocoEnv):
     def _observation(self) -> np.ndarray:
         return np.concatenate([self.data.qpos, self.data.qvel])
 
+    def distances_to_target(self) -> np.ndarray:
+        return np.linalg.norm(self._positions(self.data.qpos), axis=1)
+
     def _reward(self) -> float:
-        distances = np.linalg.norm(self._positions(self.data.qpos), axis=1)
+        distances = self.distances_to_target()
         near = dmc.tolerance(distances, bounds=(0, self.target_size), margin=self.target_size)
         small_control = dmc.control_reward(self.data.ctrl.reshape(self.n_balls, 3))
         return float(np.mean(near * small_control))

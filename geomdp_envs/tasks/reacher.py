@@ -86,8 +86,12 @@ class ReacherEnv(GeometricMujocoEnv):
         return np.concatenate([[np.cos(q1), np.sin(q1), np.cos(second), np.sin(second)],
                                self.data.qvel, self._to_target()])
 
+    def distances_to_target(self) -> np.ndarray:
+        """From the finger's centre to the target's (reward 1 within their radii's sum)."""
+        return np.array([np.linalg.norm(self._to_target())])
+
     def _reward(self) -> float:
-        return float(dmc.tolerance(np.linalg.norm(self._to_target()), (0, self._radii)))
+        return float(dmc.tolerance(self.distances_to_target()[0], (0, self._radii)))
 
     def _task_state(self) -> dict[str, np.ndarray]:
         return {"target": self.model.geom("target").pos[:2].copy()}
