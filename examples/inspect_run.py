@@ -2,7 +2,7 @@
 
     python examples/inspect_run.py results/pointmass2d_cpu/D8/seed2 [--episodes 4]
         [--evaluation] [--only I ...] [--policy | --explore] [--rotate DEG] [--reflect]
-        [--video a.mp4]
+        [--final-observation] [--video a.mp4]
 
 Prints, per episode, the first two observation coordinates at the start and
 at the end (for PointMass2D: the mass's position), how far each rewarded body is
@@ -19,7 +19,9 @@ targets do). A Q far above the return where the episode earned nothing is
 value overestimation, not a model the planner could trust. Then what the
 agent's reward model predicts for the episode's states and actions against the
 rewards earned: reward the model sees where there is none points at the model,
-an optimistic Q with a truthful reward model at the value. ``--video`` writes
+an optimistic Q with a truthful reward model at the value. ``--final-observation``
+prints each episode's last observation whole (where every ball ended: a spot an agent
+parks a ball at shows there). ``--video`` writes
 the first episode as an MP4 (rendered headless). ``--evaluation`` starts episode
 i where every evaluation of the run started its episode i (the trainer's seeds,
 drawn as the trainer draws them), to look at the episodes its ``eval.csv``
@@ -123,6 +125,9 @@ def main() -> None:
                         help="rotate every start state by DEG degrees (about the vertical axis in 3D)")
     parser.add_argument("--reflect", action="store_true",
                         help="reflect every start state y -> -y (before --rotate)")
+    parser.add_argument("--final-observation", action="store_true",
+                        help="print each episode's last observation whole (e.g. where every "
+                             "ball ended)")
     parser.add_argument("--video", type=Path, default=None, help="write the first episode to this MP4")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -175,6 +180,8 @@ def main() -> None:
               f"{distance_change(start_distances, distances_to_target(env))}; "
               f"return {sum(rewards):.1f}; Q(s_0, pi) {values[0]:.1f} vs discounted return "
               f"{returns[0]:.1f}, mean over the episode {np.mean(values):.1f} vs {np.mean(returns):.1f}")
+        if args.final_observation:
+            print(f"  final observation: {np.array2string(np.round(obs, 3), max_line_width=10**6)}")
         predicted = agent.predicted_reward(torch.stack(observations), torch.stack(actions)).cpu().numpy()
         print(f"  reward model: {predicted.sum():.1f} predicted over the episode vs "
               f"{sum(rewards):.1f} earned; at the steps that earned nothing "

@@ -191,8 +191,17 @@ def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys)
         assert error is None
     assert explored == [False] * 125 + [True] * 125
     # and compares the agent's value estimate with the return, planning or with pi alone
-    policy, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1, "--policy")
+    policy, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1, "--policy",
+                             "--final-observation")
     assert error is None
+    # --final-observation: the whole last observation, which begins with the printed end
+    end = re.search(r"episode 0: start \[[^]]*\] end \[\s*(\S+)\s+(\S+)\]", policy)
+    final = re.search(r"^  final observation: \[([^]]*)\]$", policy, re.MULTILINE)
+    assert end and final, policy
+    final = np.array(final.group(1).split(), dtype=float)
+    assert final.shape == (4,)  # PointMass2D: position, velocity
+    np.testing.assert_allclose(final[:2], np.array(end.groups(), dtype=float), atol=1e-3)
+    assert "final observation" not in planned
     for printed in (planned, policy):
         values = re.search(r"Q\(s_0, pi\) (\S+) vs discounted return (\S+), mean over the "
                            r"episode (\S+) vs (\S+)$", printed, re.MULTILINE)
