@@ -2,7 +2,7 @@
 
     python examples/inspect_run.py results/pointmass2d_cpu/D8/seed2 [--episodes 4]
         [--evaluation] [--only I ...] [--policy | --explore] [--rotate DEG] [--reflect]
-        [--final-observation] [--video a.mp4]
+        [--final-observation] [--q-heads] [--video a.mp4]
 
 Prints, per episode, the first two observation coordinates at the start and
 at the end (for PointMass2D: the mass's position), how far each rewarded body is
@@ -21,7 +21,11 @@ agent's reward model predicts for the episode's states and actions against the
 rewards earned: reward the model sees where there is none points at the model,
 an optimistic Q with a truthful reward model at the value. ``--final-observation``
 prints each episode's last observation whole (where every ball ended: a spot an agent
-parks a ball at shows there). ``--video`` writes
+parks a ball at shows there). ``--q-heads`` prints each Q head at the first state
+(the value is their minimum: a low value from one pessimistic head shows there) and,
+over the episode's last tenth, Q against ``r / (1 - discount)``, what earning that
+tenth's mean reward r forever is worth: where an agent holds its bodies at the target,
+a Q below it is a value that has not yet converged to its fixed point. ``--video`` writes
 the first episode as an MP4 (rendered headless). ``--evaluation`` starts episode
 i where every evaluation of the run started its episode i (the trainer's seeds,
 drawn as the trainer draws them), to look at the episodes its ``eval.csv``
@@ -102,6 +106,14 @@ def distance_change(start: np.ndarray | None, end: np.ndarray | None) -> str:
     return f" distance to target {rounded(start)} -> {rounded(end)}"
 
 
+def last_tenth(values: list[float], rewards: list[float], discount: float) -> tuple[float, float]:
+    """Mean Q over the episode's last tenth of agent steps, and the value of earning that
+    tenth's mean reward forever, ``r / (1 - discount)``: equal at the TD fixed point where
+    the reward has settled (a body held at its target)."""
+    tail = max(1, len(rewards) // 10)
+    return float(np.mean(values[-tail:])), float(np.mean(rewards[-tail:])) / (1.0 - discount)
+
+
 def rounded(distances: np.ndarray) -> str:
     return f"{distances[0]:.3f}" if len(distances) == 1 else str(np.round(distances, 3))
 
@@ -128,6 +140,9 @@ def main() -> None:
     parser.add_argument("--final-observation", action="store_true",
                         help="print each episode's last observation whole (e.g. where every "
                              "ball ended)")
+    parser.add_argument("--q-heads", action="store_true",
+                        help="print each Q head at the first state, and Q over the episode's "
+                             "last tenth against r / (1 - discount) for its mean reward r")
     parser.add_argument("--video", type=Path, default=None, help="write the first episode to this MP4")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -156,6 +171,7 @@ def main() -> None:
         start, done, terminated = obs[:2].copy(), False, False
         start_distances = distances_to_target(env)
         values, rewards, observations, actions = [], [], [], []  # per agent step
+        first_heads = agent.q_heads(torch.as_tensor(obs)) if args.q_heads else None
         frames = [] if args.video and episode == episodes[0] else None
         agent.start_episode()
         while not done:
@@ -180,6 +196,10 @@ def main() -> None:
               f"{distance_change(start_distances, distances_to_target(env))}; "
               f"return {sum(rewards):.1f}; Q(s_0, pi) {values[0]:.1f} vs discounted return "
               f"{returns[0]:.1f}, mean over the episode {np.mean(values):.1f} vs {np.mean(returns):.1f}")
+        if first_heads is not None:
+            tail_q, settled = last_tenth(values, rewards, discount)
+            print(f"  Q heads at s_0: {np.round(first_heads.cpu().numpy(), 1)}; last tenth of "
+                  f"the episode: Q {tail_q:.1f} vs {settled:.1f}, its mean reward forever")
         if args.final_observation:
             print(f"  final observation: {np.array2string(np.round(obs, 3), max_line_width=10**6)}")
         predicted = agent.predicted_reward(torch.stack(observations), torch.stack(actions)).cpu().numpy()

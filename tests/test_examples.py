@@ -61,6 +61,18 @@ def test_inspect_run_prints_each_balls_distance_to_the_target():
     assert inspect_run.distances_to_target(gymnasium.make("CartPole-v1")) is None
 
 
+def test_inspect_run_values_the_last_tenth_at_its_mean_reward_forever():
+    """examples/inspect_run.py --q-heads: over the last tenth of the agent steps, mean Q
+    against r / (1 - discount); a constant reward's settled value is c / (1 - discount)."""
+    inspect_run = load_script("examples/inspect_run.py")
+    rewards = [0.0] * 45 + [2.0] * 5
+    values = list(range(50))
+    tail_q, settled = inspect_run.last_tenth([float(v) for v in values], rewards, 0.99)
+    assert tail_q == pytest.approx(np.mean(values[-5:]))
+    assert settled == pytest.approx(200.0)
+    assert inspect_run.last_tenth([3.0], [1.0], 0.9) == pytest.approx((3.0, 10.0))  # one step
+
+
 def test_inspect_run_moves_start_states_by_the_element_it_names(capsys):
     """examples/inspect_run.py --rotate/--reflect in 3D (the Reacher replays use 2D): the
     element is the rotation about the vertical axis after y -> -y, the moved start is what

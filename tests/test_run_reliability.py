@@ -192,7 +192,7 @@ def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys)
     assert explored == [False] * 125 + [True] * 125
     # and compares the agent's value estimate with the return, planning or with pi alone
     policy, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1, "--policy",
-                             "--final-observation")
+                             "--final-observation", "--q-heads")
     assert error is None
     # --final-observation: the whole last observation, which begins with the printed end
     end = re.search(r"episode 0: start \[[^]]*\] end \[\s*(\S+)\s+(\S+)\]", policy)
@@ -202,6 +202,16 @@ def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys)
     assert final.shape == (4,)  # PointMass2D: position, velocity
     np.testing.assert_allclose(final[:2], np.array(end.groups(), dtype=float), atol=1e-3)
     assert "final observation" not in planned
+    # --q-heads: each head at s_0, whose minimum is the printed Q(s_0, pi)
+    heads = re.search(r"^  Q heads at s_0: \[([^]]*)\]; last tenth of the episode: Q (\S+) vs "
+                      r"(\S+), its mean reward forever$", policy, re.MULTILINE)
+    q_start = re.search(r"Q\(s_0, pi\) (\S+) vs", policy)
+    assert heads and q_start, policy
+    head_values = np.array(heads.group(1).split(), dtype=float)
+    assert head_values.shape == (2,)  # TD-MPC's two Q heads
+    assert head_values.min() == pytest.approx(float(q_start.group(1)), abs=0.11)
+    assert all(np.isfinite(float(v)) for v in heads.groups()[1:])
+    assert "Q heads" not in planned
     for printed in (planned, policy):
         values = re.search(r"Q\(s_0, pi\) (\S+) vs discounted return (\S+), mean over the "
                            r"episode (\S+) vs (\S+)$", printed, re.MULTILINE)

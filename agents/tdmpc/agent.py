@@ -184,9 +184,15 @@ class TDMPCAgent:
     def value(self, obs: torch.Tensor) -> torch.Tensor:
         """The agent's estimate of the discounted return from ``obs``: min_i Q_i(z, pi(z)),
         z = h(obs), the quantity its TD targets bootstrap on (``[...]`` for ``obs [..., n]``)."""
+        return self.q_heads(obs).min(dim=0).values
+
+    @torch.no_grad()
+    def q_heads(self, obs: torch.Tensor) -> torch.Tensor:
+        """Every Q head's Q_i(z, pi(z)), z = h(obs), stacked (``[num_q, ...]`` for
+        ``obs [..., n]``): whether :meth:`value`'s minimum is what makes it low or high."""
         with expansion_scope(self.model):
             z = self.model.encode(self._as_model_input(obs))
-            return self.model.min_q(z, self.model.pi(z)).squeeze(-1)
+            return self.model.q(z, self.model.pi(z)).squeeze(-1)
 
     @torch.no_grad()
     def predicted_reward(self, obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
