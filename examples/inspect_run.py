@@ -2,7 +2,7 @@
 
     python examples/inspect_run.py results/pointmass2d_cpu/D8/seed2 [--episodes 4]
         [--evaluation] [--only I ...] [--policy | --explore] [--rotate DEG] [--reflect]
-        [--final-observation] [--q-heads] [--video a.mp4]
+        [--final-observation] [--q-heads] [--policy-after K] [--plan-values] [--video a.mp4]
 
 Prints, per episode, the first two observation coordinates at the start and
 at the end (for PointMass2D: the mass's position), how far each rewarded body is
@@ -25,7 +25,12 @@ parks a ball at shows there). ``--q-heads`` prints each Q head at the first stat
 (the value is their minimum: a low value from one pessimistic head shows there) and,
 over the episode's last tenth, Q against ``r / (1 - discount)``, what earning that
 tenth's mean reward r forever is worth: where an agent holds its bodies at the target,
-a Q below it is a value that has not yet converged to its fixed point. ``--video`` writes
+a Q below it is a value that has not yet converged to its fixed point. Where the planner
+fails a start, ``--policy-after K`` hands the episode to the policy alone after K agent
+steps (does pi finish what the planner would not?), and ``--plan-values`` prints how each
+plan valued its best Gaussian sample against the policy's best proposal: a sample valued
+above every proposal, in an episode that earns nothing, is the planner trusting its model
+or Q where the policy does not go. ``--video`` writes
 the first episode as an MP4 (rendered headless). ``--evaluation`` starts episode
 i where every evaluation of the run started its episode i (the trainer's seeds,
 drawn as the trainer draws them), to look at the episodes its ``eval.csv``
@@ -55,6 +60,7 @@ from agents.run.envs import torchrl_env
 from agents.run.td_invariants import bootstrapped_returns
 from agents.run.trainer import evaluation_episode_seed
 from agents.run.video import frames_per_second, write_video
+from agents.tdmpc.agent import TDMPCAgent
 from geomdp_envs import groups
 
 
@@ -114,6 +120,27 @@ def last_tenth(values: list[float], rewards: list[float], discount: float) -> tu
     return float(np.mean(values[-tail:])), float(np.mean(rewards[-tail:])) / (1.0 - discount)
 
 
+def replay_action(agent: TDMPCAgent, obs: torch.Tensor, t: int, agent_step: int,
+                  args: argparse.Namespace, plan_gaps: list[float]) -> np.ndarray:
+    """The replay's action at the episode's agent step ``t``: the policy's under
+    ``--policy`` or once ``--policy-after`` has passed, else the planner's (recording how far
+    its best sample was valued above the policy's best proposal)."""
+    if args.policy or (args.policy_after is not None and t >= args.policy_after):
+        return agent.policy_action(obs).numpy()
+    action, values = agent.act_with_values(obs, agent_step, explore=args.explore)
+    if values.best_proposed is not None:
+        plan_gaps.append(float(values.best_sampled - values.best_proposed))
+    return action.numpy()
+
+
+def plan_values_line(plan_gaps: list[float], planned: int) -> str:
+    if not plan_gaps:
+        return "  planner: no policy proposals to compare with (agent.planner.num_pi_trajs = 0)"
+    return (f"  planner: best sample valued {np.mean(plan_gaps):+.1f} against the policy's best "
+            f"proposal, mean over {planned} plans (min {min(plan_gaps):+.1f}, "
+            f"max {max(plan_gaps):+.1f})")
+
+
 def rounded(distances: np.ndarray) -> str:
     return f"{distances[0]:.3f}" if len(distances) == 1 else str(np.round(distances, 3))
 
@@ -143,8 +170,19 @@ def main() -> None:
     parser.add_argument("--q-heads", action="store_true",
                         help="print each Q head at the first state, and Q over the episode's "
                              "last tenth against r / (1 - discount) for its mean reward r")
+    parser.add_argument("--policy-after", type=int, default=None, metavar="K",
+                        help="plan the first K agent steps of each episode, then act with the "
+                             "policy alone")
+    parser.add_argument("--plan-values", action="store_true",
+                        help="print how each plan valued its best sample against the policy's "
+                             "best proposal")
     parser.add_argument("--video", type=Path, default=None, help="write the first episode to this MP4")
     args = parser.parse_args()
+    if args.policy and (args.policy_after is not None or args.plan_values):
+        raise SystemExit("--policy plans nothing: --policy-after K and --plan-values need the "
+                         "planner (drop --policy)")
+    if args.policy_after is not None and args.policy_after < 0:
+        raise SystemExit(f"--policy-after {args.policy_after}: K counts agent steps, 0 or more")
     torch.set_num_threads(1)
     try:
         run = checkpoint.restore_run(args.run_dir, render_mode="rgb_array" if args.video else None)
@@ -171,6 +209,7 @@ def main() -> None:
         start, done, terminated = obs[:2].copy(), False, False
         start_distances = distances_to_target(env)
         values, rewards, observations, actions = [], [], [], []  # per agent step
+        plan_gaps: list[float] = []
         first_heads = agent.q_heads(torch.as_tensor(obs)) if args.q_heads else None
         frames = [] if args.video and episode == episodes[0] else None
         agent.start_episode()
@@ -179,8 +218,7 @@ def main() -> None:
                 frames.append(env.render())
             obs_t = torch.as_tensor(obs)
             values.append(float(agent.value(obs_t)))
-            action = (agent.policy_action(obs_t) if args.policy
-                      else agent.act(obs_t, state["agent_step"], explore=args.explore)).numpy()
+            action = replay_action(agent, obs_t, len(rewards), state["agent_step"], args, plan_gaps)
             observations.append(obs_t)
             actions.append(torch.as_tensor(action))
             rewards.append(0.0)
@@ -200,6 +238,13 @@ def main() -> None:
             tail_q, settled = last_tenth(values, rewards, discount)
             print(f"  Q heads at s_0: {np.round(first_heads.cpu().numpy(), 1)}; last tenth of "
                   f"the episode: Q {tail_q:.1f} vs {settled:.1f}, its mean reward forever")
+        if args.policy_after is not None:
+            handed = min(args.policy_after, len(rewards))
+            print(f"  policy alone from agent step {args.policy_after}: earned "
+                  f"{sum(rewards[handed:]):.1f} (the planner before it: {sum(rewards[:handed]):.1f})")
+        planned = len(rewards) if args.policy_after is None else min(args.policy_after, len(rewards))
+        if args.plan_values and planned:
+            print(plan_values_line(plan_gaps, planned))
         if args.final_observation:
             print(f"  final observation: {np.array2string(np.round(obs, 3), max_line_width=10**6)}")
         predicted = agent.predicted_reward(torch.stack(observations), torch.stack(actions)).cpu().numpy()

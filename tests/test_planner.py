@@ -115,6 +115,35 @@ def test_plain_planner_is_not_equivariant(make_agent):
     assert np.abs(b.numpy() - sym.transform_action(a.numpy(), g)).max() > 1e-3
 
 
+def test_plan_values_are_the_last_iteration_best_sample_and_best_proposal(make_agent, monkeypatch):
+    """plan_with_values: the same action as plan, and the best value among the Gaussian
+    samples and among the policy's proposals, split where the candidates are split."""
+    env, sym, agent = make_agent("GeoMDP/PointMass2D-v0", {}, None)
+    obs = torch.as_tensor(env.reset(seed=0)[0], dtype=torch.float64)
+    planner, cfg = agent.planner, agent.planner.config
+    planner.reset()
+    action = planner.plan(obs, horizon=3, min_std=0.1, explore=True, noise=RecordingNoise(1))
+    planner.reset()
+    same, values = planner.plan_with_values(obs, horizon=3, min_std=0.1, explore=True,
+                                            noise=RecordingNoise(1))
+    assert torch.equal(action, same)
+    assert values.best_sampled.ndim == 0 and torch.isfinite(values.best_sampled)
+    # candidates valued by position: samples 0..num_samples-1, then the proposals; the last
+    # iteration's best sample is the last sample, its best proposal the last proposal
+    count = cfg.num_samples + cfg.num_pi_trajs
+    ranked = torch.arange(count, dtype=torch.float64).unsqueeze(1)
+    monkeypatch.setattr(planner, "estimate_value", lambda z, actions, noise: ranked.clone())
+    _, values = planner.plan_with_values(obs, horizon=3, min_std=0.1, explore=False,
+                                         noise=RecordingNoise(2))
+    assert values.best_sampled == cfg.num_samples - 1 and values.best_proposed == count - 1
+    monkeypatch.setattr(cfg, "num_pi_trajs", 0)
+    monkeypatch.setattr(planner, "estimate_value",
+                        lambda z, actions, noise: ranked[:cfg.num_samples].clone())
+    _, values = planner.plan_with_values(obs, horizon=3, min_std=0.1, explore=False,
+                                         noise=RecordingNoise(3))
+    assert values.best_proposed is None and values.best_sampled == cfg.num_samples - 1
+
+
 @EQUIVARIANT_CASES
 def test_value_is_invariant_and_policy_action_equivariant(env_id, kwargs, group, element,
                                                          make_agent):

@@ -183,13 +183,33 @@ def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys)
     assert np.abs(first_frame(tmp_path / "replay.mp4") - frames[0]).max() > 100
     # --explore plans with the training noise (the planner is told so), --policy not at all
     explored = []
-    act = TDMPCAgent.act
-    monkeypatch.setattr(TDMPCAgent, "act", lambda self, *args, explore, **kw:
+    act = TDMPCAgent.act_with_values
+    monkeypatch.setattr(TDMPCAgent, "act_with_values", lambda self, *args, explore, **kw:
                         explored.append(explore) or act(self, *args, explore=explore, **kw))
     for flag in ([], ["--explore"]):
         _, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1, *flag)
         assert error is None
     assert explored == [False] * 125 + [True] * 125
+    # --policy-after K plans K steps and hands the rest to pi: K = 0 is --policy's episode,
+    # K = 5 plans exactly 5 times; --plan-values reports those plans
+    explored.clear()
+    handed, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1,
+                             "--policy-after", 5, "--plan-values")
+    assert error is None and explored == [False] * 5
+    gaps = re.search(r"^  planner: best sample valued (\S+) against the policy's best proposal, "
+                     r"mean over 5 plans \(min (\S+), max (\S+)\)$", handed, re.MULTILINE)
+    assert gaps, handed
+    mean_gap, low, high = (float(v) for v in gaps.groups())
+    assert low <= mean_gap <= high
+    split = re.search(r"^  policy alone from agent step 5: earned (\S+) \(the planner before it: "
+                      r"(\S+)\)$", handed, re.MULTILINE)
+    episode_return = re.search(r"; return (\S+); Q", handed)
+    assert split and episode_return, handed
+    assert float(split.group(1)) + float(split.group(2)) == pytest.approx(
+        float(episode_return.group(1)), abs=0.11)
+    from_start, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1,
+                                 "--policy-after", 0)
+    assert error is None and "planner:" not in from_start
     # and compares the agent's value estimate with the return, planning or with pi alone
     policy, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1, "--policy",
                              "--final-observation", "--q-heads")
@@ -212,6 +232,14 @@ def test_evaluation_video_is_written_and_playable(tmp_path, monkeypatch, capsys)
     assert head_values.min() == pytest.approx(float(q_start.group(1)), abs=0.11)
     assert all(np.isfinite(float(v)) for v in heads.groups()[1:])
     assert "Q heads" not in planned
+    assert re.search(r"; return (\S+);", from_start).group(1) == re.search(
+        r"; return (\S+);", policy).group(1)  # pi from the first step is --policy
+    for flags in (["--policy", "--plan-values"], ["--policy", "--policy-after", 3],
+                  ["--policy-after", -1]):
+        _, error = run_main(inspect_run, monkeypatch, capsys, tmp_path, "--episodes", 1, *flags)
+        assert error is not None and len(error.splitlines()) == 1, flags
+    assert "drop --policy" in run_main(inspect_run, monkeypatch, capsys, tmp_path, "--policy",
+                                       "--plan-values")[1]
     for printed in (planned, policy):
         values = re.search(r"Q\(s_0, pi\) (\S+) vs discounted return (\S+), mean over the "
                            r"episode (\S+) vs (\S+)$", printed, re.MULTILINE)

@@ -18,7 +18,7 @@ from agents.nn.spectral import GridActivation
 from agents.options import OptionError, check, from_dict, key, option
 from agents.tdmpc.augmentation import SliceAugmentation, is_augmentation_group_name
 from agents.tdmpc.loss import LossConfig, TDMPCLoss
-from agents.tdmpc.planner import MPPIPlanner, NoiseSource, PlannerConfig
+from agents.tdmpc.planner import MPPIPlanner, NoiseSource, PlannerConfig, PlanValues
 from agents.tdmpc.replay import ReplayConfig
 from agents.tdmpc.world_model import WorldModel
 from geomdp_envs.symmetry import Symmetry
@@ -162,13 +162,19 @@ class TDMPCAgent:
             noise: NoiseSource | None = None) -> torch.Tensor:
         """Plan an action for ``obs``; ``step`` (agent steps) drives the schedules. The
         planner's randomness comes from ``noise`` (default: the agent's own generator)."""
+        return self.act_with_values(obs, step, explore, noise)[0]
+
+    def act_with_values(self, obs: torch.Tensor, step: int, explore: bool,
+                        noise: NoiseSource | None = None) -> tuple[torch.Tensor, PlanValues]:
+        """:meth:`act`'s action, and what the plan valued its best candidates at (for
+        replays that ask why the planner chose what it did)."""
         obs = obs.to(self.device, torch.float32)
         # Every equivariant weight expanded once for the whole plan, from the current
         # parameters (updates happen between calls, never inside one).
         with torch.no_grad(), expansion_scope(self.model):
-            return self.planner.plan(obs, horizon=self.horizon(step),
-                                     min_std=self.config.std_schedule(step), explore=explore,
-                                     noise=self.noise if noise is None else noise)
+            return self.planner.plan_with_values(
+                obs, horizon=self.horizon(step), min_std=self.config.std_schedule(step),
+                explore=explore, noise=self.noise if noise is None else noise)
 
     def _as_model_input(self, obs: torch.Tensor) -> torch.Tensor:
         return obs.to(self.device, next(self.model.parameters()).dtype)

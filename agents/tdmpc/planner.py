@@ -61,6 +61,16 @@ class NoiseSource:
         return int(torch.multinomial(probs.double().cpu(), 1, generator=self.generator))
 
 
+class PlanValues(typing.NamedTuple):
+    """What the last iteration of one plan valued its candidates at (predicted rewards
+    plus terminal Q): the best Gaussian sample, and the best of the policy's proposals
+    (None without them). A sample far above every proposal that then earns nothing
+    is the planner trusting its model or Q where the policy does not go."""
+
+    best_sampled: torch.Tensor
+    best_proposed: torch.Tensor | None
+
+
 class MPPIPlanner:
     """Plans one action at a time; keeps the previous plan for warm starts."""
 
@@ -98,12 +108,18 @@ class MPPIPlanner:
                                  noise.normal((z.shape[0], self.model.action_dim), z))
         return value + discount * self.model.min_q(z, terminal)
 
-    @torch.no_grad()
     def plan(self, obs: torch.Tensor, *, horizon: int, min_std: float, explore: bool,
              noise: NoiseSource) -> torch.Tensor:
         """The action for observation ``obs`` [obs_dim]; ``min_std`` is TD-MPC's
         scheduled standard deviation (exploration noise and lower bound of the
         planner's spread)."""
+        return self.plan_with_values(obs, horizon=horizon, min_std=min_std, explore=explore,
+                                     noise=noise)[0]
+
+    @torch.no_grad()
+    def plan_with_values(self, obs: torch.Tensor, *, horizon: int, min_std: float,
+                         explore: bool, noise: NoiseSource) -> tuple[torch.Tensor, PlanValues]:
+        """:meth:`plan`'s action, and how its last iteration valued the candidates."""
         cfg, model = self.config, self.model
         fields, action_dim = model.action_fields, model.action_dim
         z0 = model.encode(obs.unsqueeze(0))
@@ -148,4 +164,6 @@ class MPPIPlanner:
         action = chosen[0]
         if explore:
             action = project(action + std[0, index] * noise.normal((action_dim,), action), fields)
-        return action
+        values = PlanValues(value[:cfg.num_samples].max(),
+                            value[cfg.num_samples:].max() if cfg.num_pi_trajs > 0 else None)
+        return action, values
