@@ -25,7 +25,8 @@ parks a ball at shows there). ``--q-heads`` prints each Q head at the first stat
 (the value is their minimum: a low value from one pessimistic head shows there) and,
 over the episode's last tenth, Q against ``r / (1 - discount)``, what earning that
 tenth's mean reward r forever is worth: where an agent holds its bodies at the target,
-a Q below it is a value that has not yet converged to its fixed point. Where the planner
+a Q below it is what a value still converging to its fixed point shows (a bias can show
+the same; the run's Q over time, in ``train.csv``, tells them apart). Where the planner
 fails a start, ``--policy-after K`` hands the episode to the policy alone after K agent
 steps (does pi finish what the planner would not?), and ``--plan-values`` prints how each
 plan valued its best Gaussian sample against the policy's best proposal: a sample valued

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 import torch
 
+from agents.nn.expansion import expansion_scope
 from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
 from agents.tdmpc.planner import NoiseSource
 from geomdp_envs import declare, groups, symmetry_of
@@ -113,6 +114,24 @@ def test_plain_planner_is_not_equivariant(make_agent):
     moved = [torch.as_tensor(sym.transform_observation(o.numpy(), g)) for o in obs]
     b = plan_twice(agent, moved, TransformedNoise(recording, sym.action_matrix(g)))[0]
     assert np.abs(b.numpy() - sym.transform_action(a.numpy(), g)).max() > 1e-3
+
+
+@pytest.mark.parametrize("group", [None, "D8"])
+def test_q_heads_are_each_online_head_and_value_their_minimum(make_agent, group):
+    """q_heads: every online Q head at (h(obs), pi(h(obs))), one row per head; value is
+    their minimum, bitwise (what TD targets and the planner use), for one state and a batch."""
+    env, sym, agent = make_agent("GeoMDP/PointMass2D-v0", {}, group)
+    batch = torch.stack([torch.as_tensor(env.reset(seed=i)[0], dtype=torch.float64)
+                         for i in range(5)])
+    for obs in (batch, batch[0]):
+        heads = agent.q_heads(obs)
+        assert heads.shape == (len(agent.model.qs), *obs.shape[:-1])
+        with torch.no_grad(), expansion_scope(agent.model):
+            z = agent.model.encode(obs)
+            expected = torch.stack([q(torch.cat([z, agent.model.pi(z)], -1)) for q in agent.model.qs])
+        torch.testing.assert_close(heads, expected.squeeze(-1), rtol=0, atol=1e-12)
+        assert torch.equal(agent.value(obs), heads.min(dim=0).values)
+    assert (heads[0] != heads[1]).any()  # randomised heads: the minimum picks one of two
 
 
 def test_plan_values_are_the_last_iteration_best_sample_and_best_proposal(make_agent, monkeypatch):
