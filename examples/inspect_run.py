@@ -211,14 +211,16 @@ def main() -> None:
         start_distances = distances_to_target(env)
         values, rewards, observations, actions = [], [], [], []  # per agent step
         plan_gaps: list[float] = []
-        first_heads = agent.q_heads(torch.as_tensor(obs)) if args.q_heads else None
+        first_heads = None  # every Q head at s_0 (the value is their minimum)
         frames = [] if args.video and episode == episodes[0] else None
         agent.start_episode()
         while not done:
             if frames is not None:
                 frames.append(env.render())
             obs_t = torch.as_tensor(obs)
-            values.append(float(agent.value(obs_t)))
+            heads = agent.q_heads(obs_t)
+            first_heads = heads if first_heads is None else first_heads
+            values.append(float(heads.min(dim=0).values))  # agent.value(obs_t), bitwise
             action = replay_action(agent, obs_t, len(rewards), state["agent_step"], args, plan_gaps)
             observations.append(obs_t)
             actions.append(torch.as_tensor(action))
@@ -235,15 +237,14 @@ def main() -> None:
               f"{distance_change(start_distances, distances_to_target(env))}; "
               f"return {sum(rewards):.1f}; Q(s_0, pi) {values[0]:.1f} vs discounted return "
               f"{returns[0]:.1f}, mean over the episode {np.mean(values):.1f} vs {np.mean(returns):.1f}")
-        if first_heads is not None:
+        if args.q_heads:
             tail_q, settled = last_tenth(values, rewards, discount)
             print(f"  Q heads at s_0: {np.round(first_heads.cpu().numpy(), 1)}; last tenth of "
                   f"the episode: Q {tail_q:.1f} vs {settled:.1f}, its mean reward forever")
-        if args.policy_after is not None:
-            handed = min(args.policy_after, len(rewards))
-            print(f"  policy alone from agent step {args.policy_after}: earned "
-                  f"{sum(rewards[handed:]):.1f} (the planner before it: {sum(rewards[:handed]):.1f})")
         planned = len(rewards) if args.policy_after is None else min(args.policy_after, len(rewards))
+        if args.policy_after is not None:
+            print(f"  policy alone from agent step {args.policy_after}: earned "
+                  f"{sum(rewards[planned:]):.1f} (the planner before it: {sum(rewards[:planned]):.1f})")
         if args.plan_values and planned:
             print(plan_values_line(plan_gaps, planned))
         if args.final_observation:
