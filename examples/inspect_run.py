@@ -211,16 +211,14 @@ def main() -> None:
         start_distances = distances_to_target(env)
         values, rewards, observations, actions = [], [], [], []  # per agent step
         plan_gaps: list[float] = []
-        first_heads = None  # every Q head at s_0 (the value is their minimum)
+        first_heads = agent.q_heads(torch.as_tensor(obs)) if args.q_heads else None
         frames = [] if args.video and episode == episodes[0] else None
         agent.start_episode()
         while not done:
             if frames is not None:
                 frames.append(env.render())
             obs_t = torch.as_tensor(obs)
-            heads = agent.q_heads(obs_t)
-            first_heads = heads if first_heads is None else first_heads
-            values.append(float(heads.min(dim=0).values))  # agent.value(obs_t), bitwise
+            values.append(float(agent.value(obs_t)))
             action = replay_action(agent, obs_t, len(rewards), state["agent_step"], args, plan_gaps)
             observations.append(obs_t)
             actions.append(torch.as_tensor(action))
@@ -237,7 +235,7 @@ def main() -> None:
               f"{distance_change(start_distances, distances_to_target(env))}; "
               f"return {sum(rewards):.1f}; Q(s_0, pi) {values[0]:.1f} vs discounted return "
               f"{returns[0]:.1f}, mean over the episode {np.mean(values):.1f} vs {np.mean(returns):.1f}")
-        if args.q_heads:
+        if first_heads is not None:
             tail_q, settled = last_tenth(values, rewards, discount)
             print(f"  Q heads at s_0: {np.round(first_heads.cpu().numpy(), 1)}; last tenth of "
                   f"the episode: Q {tail_q:.1f} vs {settled:.1f}, its mean reward forever")
