@@ -44,6 +44,7 @@ import csv
 import datetime as dt
 import fnmatch
 import os
+import platform
 import re
 import shlex
 import shutil
@@ -66,6 +67,23 @@ STARTUP_MINUTES = 1.0  # building the agent and the first evaluation's set-up, p
 
 class PlanError(ValueError):
     """A plan or command line the queue cannot run."""
+
+
+def blas_kernels() -> dict[str, str]:
+    """numpy's OpenBLAS kernels for the runs: AVX2 ones on every x86-64 CPU, unless
+    OPENBLAS_CORETYPE is set already.
+
+    escnn solves for some bases numerically (the dihedral groups' Clebsch-Gordan
+    coefficients, an SVD of a system whose solutions are not unique) and caches them
+    on disk, and OpenBLAS picks its kernels by CPU: on an AVX-512 machine it solved for
+    another basis of the same space than the AVX2 machines every run before 2026-12-07
+    was made on, and a carried D8 run could not resume (its checkpoint held
+    coefficients only; later commits store the bases too: docs/checkpoints.md). With
+    the same kernels everywhere, what the runs put in the cache is what they were
+    trained with."""
+    if os.environ.get("OPENBLAS_CORETYPE") or platform.machine() not in ("x86_64", "AMD64"):
+        return {}
+    return {"OPENBLAS_CORETYPE": "Haswell"}
 
 
 @dataclass
@@ -446,7 +464,7 @@ class Queue:
             proc = subprocess.Popen(run.argv(self.python, self.module), cwd=self.worktree,
                                     stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
                                     env={**os.environ, "OMP_NUM_THREADS": "1",
-                                         "MKL_NUM_THREADS": "1"})
+                                         "MKL_NUM_THREADS": "1", **blas_kernels()})
         (run.work / PID_FILE).write_text(str(proc.pid))
         self.running[run.dest] = (run, proc, dt.datetime.now())
         say(f"{how}: {run.dest} (expected {self.remaining(run):.0f} min, "

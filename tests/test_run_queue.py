@@ -390,3 +390,17 @@ def test_an_adopted_carried_run_is_committed_with_its_checkpoint(repo: Path, cap
     step = saved_step(queue.runs[0].work)
     assert step and saved_step(repo / "results/x/long/seed1") == step
     assert f"carried at env step {step}" in git(repo, "log", "-1", "--format=%s")
+
+
+def test_runs_get_the_avx2_blas_kernels_on_every_x86_cpu(monkeypatch) -> None:
+    """escnn's disk cache holds bases solved with numpy's BLAS: the queue's runs use one
+    kernel family on every x86-64 CPU (scripts/run_queue.py, ``blas_kernels``), keep a
+    choice already made, and leave other CPUs alone."""
+    monkeypatch.delenv("OPENBLAS_CORETYPE", raising=False)
+    monkeypatch.setattr(rq.platform, "machine", lambda: "x86_64")
+    assert rq.blas_kernels() == {"OPENBLAS_CORETYPE": "Haswell"}
+    monkeypatch.setattr(rq.platform, "machine", lambda: "aarch64")
+    assert rq.blas_kernels() == {}
+    monkeypatch.setattr(rq.platform, "machine", lambda: "x86_64")
+    monkeypatch.setenv("OPENBLAS_CORETYPE", "Zen")
+    assert rq.blas_kernels() == {}

@@ -1,5 +1,6 @@
 """Interruptions, damaged checkpoints and bad run directories: nothing lost, one clear line."""
 
+import copy
 import json
 import re
 import shutil
@@ -322,25 +323,59 @@ def test_a_checkpoint_whose_rebuilt_bases_differ_is_refused(tmp_path, capsys, ag
     assert "escnn rebuilt a different basis" in err
 
 
+def small_agent_factory(group: str, layers: str = "dense"):
+    """A maker of small agents of ``group`` on PointMass2D (PointMass3D for the 3D
+    groups), and a batch of random transitions for them."""
+    import gymnasium
+    from tensordict import TensorDict
+
+    from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
+
+    task = "GeoMDP/PointMass3D-v0" if group in ("octahedral", "icosahedral") else "GeoMDP/PointMass2D-v0"
+    sym = gymnasium.make(task).unwrapped.symmetry
+    n, h, g = 8, 3, torch.Generator().manual_seed(1)
+    cfg = TDMPCConfig.from_dict({"group": group, "width_strategy": "sqrt", "batch_size": n,
+                                 "horizon": h, "networks": {
+                                     "hidden_dim": 32, "latent_dim": 16, "layers": layers}})
+    obs = torch.randn(n, h + 1, sym.observation_size, generator=g)
+    batch = TensorDict({
+        "observation": obs[:, :-1], "action": torch.rand(n, h, sym.action_size, generator=g) - 0.5,
+        "next": {"observation": obs[:, 1:], "reward": torch.rand(n, h, 1, generator=g),
+                 "terminated": torch.zeros(n, h, 1, dtype=torch.bool)}}, batch_size=[n, h])
+    return (lambda: TDMPCAgent(cfg, sym, sym.observation_size, sym.action_size, seed=0)), batch
+
+
+def equivariant_linears(agent):
+    """The dense equivariant layers of the online and the target model."""
+    from agents.nn.layers import EquivariantLinear
+
+    return [m for model in (agent.model, agent.loss.target_model) for m in model.modules()
+            if isinstance(m, EquivariantLinear)]
+
+
+@torch.no_grad()
+def solve_another_basis(agent, seed: int = 1) -> None:
+    """Give every dense equivariant layer another basis of the same space, as escnn
+    does on a machine whose BLAS kernels differ (an orthogonal mix of its rows)."""
+    g = torch.Generator().manual_seed(seed)
+    for layer in equivariant_linears(agent):
+        for basis in layer.bases():
+            n = basis.shape[0]
+            mix, _ = torch.linalg.qr(torch.randn(n, n, generator=g, dtype=torch.float64))
+            basis.copy_((mix.T @ basis.double()).to(basis.dtype))
+
+
 @pytest.mark.parametrize("layers, buffer", [("dense", "_basis0"), ("fourier", "fourier_in")])
 def test_fingerprints_follow_the_rebuilt_bases(layers, buffer):
     """The fingerprints are the layers' maps on a probe, applied by their own forward
     (not by expanding the weights, which made saving a paper-preset D8 checkpoint take
-    seconds): the same bases load, a different basis of either layer kind is refused."""
-    import gymnasium
-
+    seconds): the same bases load; a different Fourier transform is refused, and so is
+    a different dense basis when the checkpoint has no stored bases (written before
+    they were stored; with them, the stored ones are applied)."""
     from agents.nn.fourier import FourierLinear
     from agents.nn.layers import EquivariantLinear
-    from agents.tdmpc.agent import TDMPCAgent, TDMPCConfig
 
-    sym = gymnasium.make("GeoMDP/PointMass2D-v0").unwrapped.symmetry
-    cfg = TDMPCConfig.from_dict({"group": "D4", "width_strategy": "sqrt", "batch_size": 8,
-                                 "horizon": 3, "networks": {"hidden_dim": 32, "latent_dim": 16,
-                                                            "layers": layers}})
-
-    def agent():
-        return TDMPCAgent(cfg, sym, sym.observation_size, sym.action_size, seed=0)
-
+    agent, _ = small_agent_factory("D4", layers)
     saved = agent().state_dict()
     agent().load_state_dict(saved)  # rebuilt the same: accepted
     changed = agent()
@@ -349,5 +384,41 @@ def test_fingerprints_follow_the_rebuilt_bases(layers, buffer):
     assert name in saved["basis_fingerprints"]
     with torch.no_grad():
         getattr(layer, buffer).neg_()
+    if layers == "dense":
+        saved = {k: v for k, v in saved.items() if k != "bases"}
     with pytest.raises(ValueError, match=f"escnn rebuilt a different basis .*for {name} "):
         changed.load_state_dict(saved)
+
+
+@pytest.mark.parametrize("group", ["D4", "octahedral"])
+def test_a_resume_applies_the_bases_the_coefficients_were_trained_with(group):
+    """escnn solves for some bases numerically and caches them on disk, so a machine
+    with other BLAS kernels can rebuild another basis of the same space (seen: D8 on an
+    AVX-512 machine, a checkpoint made with AVX2 ones). Checkpoints store the bases: a
+    resume applies them in the online and the target model, and training goes on
+    exactly as it would have."""
+    agent, batch = small_agent_factory(group)
+    original = agent()
+    original.update(batch)
+    saved = copy.deepcopy(original.state_dict())  # as saved to disk: no tensor shared
+    assert saved["bases"] and all(saved["bases"].values())
+    resumed = agent()
+    solve_another_basis(resumed)
+    obs = batch["observation"][:, 0]
+    assert not torch.equal(resumed.model.encode(obs), original.model.encode(obs))
+    resumed.load_state_dict(saved)
+    for model in ("model", "target_model"):
+        net, reference = getattr(resumed.loss, model), getattr(original.loss, model)
+        assert torch.equal(net.encode(obs), reference.encode(obs)), model
+    metrics = []
+    for agent_ in (resumed, original):
+        torch.manual_seed(0)  # the global state the checkpoint restores beside the agent
+        metrics.append(agent_.update(batch)[0])
+    assert metrics[0] == metrics[1]
+    assert all(torch.equal(a, b) for a, b in zip(resumed.model.parameters(),
+                                                 original.model.parameters()))
+    # a basis that spans other maps (not equivariant here) is refused
+    name = next(iter(saved["bases"]))
+    saved["bases"][name][0] = torch.randn_like(saved["bases"][name][0])
+    with pytest.raises(ValueError, match=f"bases for {name}: basis 0 spans other maps"):
+        agent().load_state_dict(saved)

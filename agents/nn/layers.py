@@ -84,6 +84,32 @@ class EquivariantLinear(ScopedExpansion):
     def out_type(self) -> enn.FieldType:
         return self.layer.out_type
 
+    def bases(self) -> list[torch.Tensor]:
+        """The sampled basis of each field-type pair as this layer applies it
+        ([basis, out_size x in_size]): what its coefficients mean. escnn solves for some
+        bases numerically and caches them on disk, so another machine (other BLAS
+        kernels) can rebuild another basis of the same space (docs/checkpoints.md)."""
+        return [getattr(self, f"_basis{k}") for k in range(len(self._pairs))]
+
+    @torch.no_grad()
+    def adopt_bases(self, bases: list[torch.Tensor]) -> None:
+        """Apply ``bases`` (another build's ``bases()``) from now on, so that the same
+        coefficients give the same maps as in that build. Each must span exactly the
+        space of the basis rebuilt here (this machine's equivariant maps between the
+        pair's fields); otherwise a ValueError, and nothing is changed."""
+        own = self.bases()
+        if len(bases) != len(own):
+            raise ValueError(f"{len(bases)} bases for a layer with {len(own)} field-type pairs")
+        for k, (saved, rebuilt) in enumerate(zip(bases, own)):
+            if saved.shape != rebuilt.shape:
+                raise ValueError(f"basis {k} has shape {tuple(saved.shape)}, this layer's "
+                                 f"{tuple(rebuilt.shape)}")
+            if not (_spans_within(saved, rebuilt) and _spans_within(rebuilt, saved)):
+                raise ValueError(f"basis {k} spans other maps than this layer's equivariant "
+                                 "ones (another group representation?)")
+        for saved, rebuilt in zip(bases, own):
+            rebuilt.copy_(saved)
+
     def train(self, mode: bool = True) -> EquivariantLinear:
         # escnn's Linear stores expanded buffers in eval mode, which would change
         # the state_dict between modes; this layer never uses them.
@@ -133,6 +159,14 @@ class EquivariantLinear(ScopedExpansion):
             if bias is not None:
                 out.bias.copy_(bias)
         return out.to(weight.device)
+
+
+def _spans_within(a: torch.Tensor, b: torch.Tensor, rtol: float = 1e-5) -> bool:
+    """Whether every row of ``a`` is a linear combination of the rows of ``b`` (up to
+    float32 rounding): least squares in float64."""
+    a64, b64 = a.detach().double().cpu(), b.detach().double().cpu()
+    mix = torch.linalg.lstsq(b64.T, a64.T).solution
+    return bool(torch.linalg.norm(b64.T @ mix - a64.T) <= rtol * torch.linalg.norm(a64))
 
 
 LINEAR_KINDS = ("dense", "fourier")

@@ -13,6 +13,7 @@ from torchrl.objectives import SoftUpdate
 from agents.compat.escnn import is_basis_expansion_key, is_linear_buffer
 from agents.nn.escnn_groups import GROUP_NAMES
 from agents.nn.expansion import expansion_scope
+from agents.nn.layers import EquivariantLinear
 from agents.nn.networks import NetworkConfig, build_networks
 from agents.nn.spectral import GridActivation
 from agents.options import OptionError, check, from_dict, key, option
@@ -258,6 +259,34 @@ class TDMPCAgent:
                 out[name] = module.to_grid.double().cpu().T @ _probe(module.to_grid.shape[0])
         return out
 
+    def bases(self) -> dict[str, list[torch.Tensor]]:
+        """The bases each dense equivariant layer applies, by module name (the online
+        model's; the target's are the same): saved with the coefficients, so that a
+        resume applies the bases they were trained with, whichever basis of the same
+        space escnn solves for on the resuming machine."""
+        return {name: [basis.detach().cpu() for basis in module.bases()]
+                for name, module in self.model.named_modules()
+                if isinstance(module, EquivariantLinear)}
+
+    def adopt_bases(self, saved: dict[str, list[torch.Tensor]]) -> None:
+        """Apply ``saved`` (``bases()`` of the checkpoint) in the online and the target
+        model, each checked to span the rebuilt layer's maps (``EquivariantLinear.adopt_bases``).
+        Checkpoints written before the bases were saved have none: their layers keep the
+        rebuilt bases, which the fingerprints then check."""
+        if not saved:
+            return
+        for model in (self.model, self.loss.target_model):
+            layers = {name: module for name, module in model.named_modules()
+                      if isinstance(module, EquivariantLinear)}
+            if layers.keys() != saved.keys():
+                raise ValueError(f"the saved bases are for other layers ({sorted(saved)[:3]}) "
+                                 f"than this agent's ({sorted(layers)[:3]})")
+            for name, layer in layers.items():
+                try:
+                    layer.adopt_bases(saved[name])
+                except ValueError as err:
+                    raise ValueError(f"the checkpoint's bases for {name}: {err}") from None
+
     @torch.no_grad()
     def target_lag(self) -> float:
         """|online - target| / |online| over all model parameters: small and non-zero
@@ -271,7 +300,8 @@ class TDMPCAgent:
 
     def state_dict(self) -> dict[str, Any]:
         networks = {k: v for k, v in self.loss.state_dict().items() if not rebuilt_with_networks(k)}
-        return {"loss": networks, "basis_fingerprints": self.basis_fingerprints(),
+        return {"loss": networks, "bases": self.bases(),
+                "basis_fingerprints": self.basis_fingerprints(),
                 "model_optimizer": self.model_optimizer.state_dict(),
                 "policy_optimizer": self.policy_optimizer.state_dict(),
                 "generator": self.generator.get_state(), "updates": self.updates,
@@ -284,13 +314,15 @@ class TDMPCAgent:
         if missing or unexpected:
             raise ValueError(f"the saved networks do not fit this agent (missing "
                              f"{missing[:3]}, unexpected {unexpected[:3]})")
+        self.adopt_bases(state.get("bases", {}))
         rebuilt = self.basis_fingerprints()
         for name, saved in state.get("basis_fingerprints", {}).items():
             now = rebuilt.get(name)
             if now is None or not torch.allclose(now, saved.to(now), rtol=1e-4, atol=1e-5):
                 raise ValueError(f"escnn rebuilt a different basis (or sampling grid) for {name} "
                                  "than the one the checkpoint was trained with (another escnn "
-                                 "version or cache?)")
+                                 "version, or its disk cache filled on another CPU: "
+                                 "docs/checkpoints.md)")
         self.model_optimizer.load_state_dict(state["model_optimizer"])
         self.policy_optimizer.load_state_dict(state["policy_optimizer"])
         self.generator.set_state(state["generator"])
