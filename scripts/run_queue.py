@@ -56,6 +56,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agents.run.checkpoint_state import LOCK_FILE, WRITE_PROBE, checkpoint_paths, saved_step
+from agents.run.run_log import cpu_model
 from agents.run.run_tables import wall_minutes
 
 REPO = Path(__file__).resolve().parent.parent
@@ -271,18 +272,6 @@ def copy_logs(src: Path, dest: Path, with_checkpoint: bool = False) -> None:
     partial.rename(dest)
 
 
-def cpu_model() -> str:
-    """This machine's processor, as /proc/cpuinfo names it (runs of one commit are
-    bit-identical on one kind of machine only)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown cpu"
-
-
 def git(repo: Path, *args: str) -> subprocess.CompletedProcess[str]:
     """git in ``repo``, retried while another git process holds the index lock."""
     for _ in range(30):
@@ -454,9 +443,11 @@ class Queue:
                    f"evaluated up to env step {seen})")
         else:
             how = "starting"
+        kernels = blas_kernels()
         with (run.work / "stdout.log").open("a") as out:
             out.write(f"run_queue {dt.datetime.now():%Y-%m-%d %H:%M:%S}: {how}, "
-                      f"commit {self.commit[:10]}, cpu {cpu_model()}\n")
+                      f"commit {self.commit[:10]}, cpu {cpu_model()}"
+                      + "".join(f", {k}={v}" for k, v in kernels.items()) + "\n")
             out.flush()
             # A session of its own: Ctrl-C on the queue reaches the trainers only through
             # stop_all's one SIGTERM (a second signal would stop them without their
@@ -464,7 +455,7 @@ class Queue:
             proc = subprocess.Popen(run.argv(self.python, self.module), cwd=self.worktree,
                                     stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
                                     env={**os.environ, "OMP_NUM_THREADS": "1",
-                                         "MKL_NUM_THREADS": "1", **blas_kernels()})
+                                         "MKL_NUM_THREADS": "1", **kernels})
         (run.work / PID_FILE).write_text(str(proc.pid))
         self.running[run.dest] = (run, proc, dt.datetime.now())
         say(f"{how}: {run.dest} (expected {self.remaining(run):.0f} min, "

@@ -404,3 +404,4 @@ def test_runs_get_the_avx2_blas_kernels_on_every_x86_cpu(monkeypatch) -> None:
     monkeypatch.setattr(rq.platform, "machine", lambda: "x86_64")
     monkeypatch.setenv("OPENBLAS_CORETYPE", "Zen")
     assert rq.blas_kernels() == {}
+    assert rq.cpu_model().endswith("OPENBLAS_CORETYPE=Zen)")  # what sessions.csv records

@@ -12,6 +12,7 @@ from __future__ import annotations
 import datetime
 import importlib.metadata
 import importlib.util
+import os
 import platform
 import subprocess
 from pathlib import Path
@@ -52,14 +53,31 @@ def _version(package: str) -> str:
 
 
 def cpu_model() -> str:
-    """The CPU's model name (runs are bit-identical only on the same kind of CPU)."""
+    """The CPU's model name, with its family, model and widest vector instructions
+    where /proc/cpuinfo lists them, and numpy's OpenBLAS kernels where they are
+    chosen (OPENBLAS_CORETYPE): runs are bit-identical only on the same kind of CPU,
+    "AMD EPYC" names several, and the kernels decide the bases escnn solves for
+    (docs/checkpoints.md)."""
     try:
+        fields = {}
         for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.lower().startswith(("model name", "hardware", "cpu model")):
-                return " ".join(line.split(":", 1)[1].split())
+            key, _, value = line.partition(":")
+            fields.setdefault(key.strip().lower(), " ".join(value.split()))
+            if not line.strip():
+                break  # the first processor is enough
     except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown"
+        fields = {}
+    name = next((fields[k] for k in ("model name", "hardware", "cpu model") if fields.get(k)),
+                platform.processor() or platform.machine() or "unknown")
+    details = []
+    if "cpu family" in fields and "model" in fields:
+        details.append(f"family {fields['cpu family']} model {fields['model']}")
+    flags = set(fields.get("flags", "").split())
+    if flags:
+        details.append("AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "no AVX2")
+    if os.environ.get("OPENBLAS_CORETYPE"):
+        details.append(f"OPENBLAS_CORETYPE={os.environ['OPENBLAS_CORETYPE']}")
+    return f"{name} ({'; '.join(details)})" if details else name
 
 
 def session_record(env_step: int) -> dict[str, str | int]:
