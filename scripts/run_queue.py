@@ -44,7 +44,6 @@ import csv
 import datetime as dt
 import fnmatch
 import os
-import platform
 import re
 import shlex
 import shutil
@@ -56,7 +55,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agents.run.checkpoint_state import LOCK_FILE, WRITE_PROBE, checkpoint_paths, saved_step
-from agents.run.run_log import cpu_model
+from agents.run.run_log import cpu_flags, cpu_model
 from agents.run.run_tables import wall_minutes
 
 REPO = Path(__file__).resolve().parent.parent
@@ -71,18 +70,20 @@ class PlanError(ValueError):
 
 
 def blas_kernels() -> dict[str, str]:
-    """numpy's OpenBLAS kernels for the runs: AVX2 ones on every x86-64 CPU, unless
-    OPENBLAS_CORETYPE is set already.
+    """OpenBLAS's kernels for the runs: the AVX2 ones (``Haswell``) on every CPU that
+    has AVX2, unless OPENBLAS_CORETYPE is set already; nothing elsewhere (forcing
+    them on a CPU without AVX2 would stop the run at its first illegal instruction).
 
-    escnn solves for some bases numerically (the dihedral groups' Clebsch-Gordan
-    coefficients, an SVD of a system whose solutions are not unique) and caches them
-    on disk, and OpenBLAS picks its kernels by CPU: on an AVX-512 machine it solved for
-    another basis of the same space than the AVX2 machines every run before 2026-12-07
-    was made on, and a carried D8 run could not resume (its checkpoint held
-    coefficients only; later commits store the bases too: docs/checkpoints.md). With
-    the same kernels everywhere, what the runs put in the cache is what they were
+    escnn solves for some bases numerically with scipy's SVD (the dihedral groups'
+    Clebsch-Gordan coefficients: a system whose solutions are not unique) and caches
+    them on disk, and OpenBLAS (numpy's and scipy's) picks its kernels by CPU. On an
+    AVX-512 machine it solved for another D8 basis of the same space than the AVX2
+    machines every run before 2026-12-07 was made on (Haswell and Zen kernels gave
+    those machines' basis), and a carried D8 run could not resume: its checkpoint held
+    coefficients only (later commits store the bases too: docs/checkpoints.md). With
+    one kernel family everywhere, what the runs put in the cache is what they were
     trained with."""
-    if os.environ.get("OPENBLAS_CORETYPE") or platform.machine() not in ("x86_64", "AMD64"):
+    if os.environ.get("OPENBLAS_CORETYPE") or "avx2" not in cpu_flags():
         return {}
     return {"OPENBLAS_CORETYPE": "Haswell"}
 

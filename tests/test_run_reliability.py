@@ -1,6 +1,6 @@
 """Interruptions, damaged checkpoints and bad run directories: nothing lost, one clear line."""
 
-import copy
+import io
 import json
 import re
 import shutil
@@ -15,6 +15,7 @@ from test_train import config, rows
 
 from agents import TDMPCAgent
 from agents.cli.train import run
+from agents.nn.layers import dense_equivariant_layers
 from agents.run import checkpoint
 from agents.run.presets import compose_config, sweep_dirname, usable_cores
 
@@ -303,9 +304,10 @@ def test_sweep_directories_stay_short_and_the_launcher_uses_one_process_per_core
     (["agent.group=SO3"], "encoder.net.2"),  # a continuous group's sampling grid
 ])
 def test_a_checkpoint_whose_rebuilt_bases_differ_is_refused(tmp_path, capsys, agent, flipped):
-    """Checkpoints store basis coefficients, not escnn's bases (nor the grids sampled
-    from its irreps): if escnn rebuilds a different one (another version, another
-    cache), resuming must refuse, not run a different network."""
+    """Checkpoints store the coefficients and the dense layers' bases, not the grids
+    sampled from escnn's irreps nor the Fourier transforms: if a layer's map differs
+    from the one the checkpoint fingerprinted (another escnn version, another cache),
+    resuming must refuse, not run a different network."""
     assert run(config("env=pointmass3d", *agent, "train.steps=1000"), tmp_path) == 0
     agent_file = tmp_path / "checkpoint/agent.pt"
     saved = torch.load(agent_file, weights_only=False)
@@ -345,20 +347,13 @@ def small_agent_factory(group: str, layers: str = "dense"):
     return (lambda: TDMPCAgent(cfg, sym, sym.observation_size, sym.action_size, seed=0)), batch
 
 
-def equivariant_linears(agent):
-    """The dense equivariant layers of the online and the target model."""
-    from agents.nn.layers import EquivariantLinear
-
-    return [m for model in (agent.model, agent.loss.target_model) for m in model.modules()
-            if isinstance(m, EquivariantLinear)]
-
-
 @torch.no_grad()
 def solve_another_basis(agent, seed: int = 1) -> None:
     """Give every dense equivariant layer another basis of the same space, as escnn
     does on a machine whose BLAS kernels differ (an orthogonal mix of its rows)."""
     g = torch.Generator().manual_seed(seed)
-    for layer in equivariant_linears(agent):
+    for layer in [*dense_equivariant_layers(agent.model).values(),
+                  *dense_equivariant_layers(agent.loss.target_model).values()]:
         for basis in layer.bases():
             n = basis.shape[0]
             mix, _ = torch.linalg.qr(torch.randn(n, n, generator=g, dtype=torch.float64))
@@ -400,7 +395,9 @@ def test_a_resume_applies_the_bases_the_coefficients_were_trained_with(group):
     agent, batch = small_agent_factory(group)
     original = agent()
     original.update(batch)
-    saved = copy.deepcopy(original.state_dict())  # as saved to disk: no tensor shared
+    buffer = io.BytesIO()
+    torch.save(original.state_dict(), buffer)  # as a checkpoint holds it: no tensor shared
+    saved = torch.load(io.BytesIO(buffer.getvalue()), weights_only=False)
     assert saved["bases"] and all(saved["bases"].values())
     resumed = agent()
     solve_another_basis(resumed)
@@ -415,10 +412,16 @@ def test_a_resume_applies_the_bases_the_coefficients_were_trained_with(group):
         torch.manual_seed(0)  # the global state the checkpoint restores beside the agent
         metrics.append(agent_.update(batch)[0])
     assert metrics[0] == metrics[1]
-    assert all(torch.equal(a, b) for a, b in zip(resumed.model.parameters(),
-                                                 original.model.parameters()))
-    # a basis that spans other maps (not equivariant here) is refused
-    name = next(iter(saved["bases"]))
-    saved["bases"][name][0] = torch.randn_like(saved["bases"][name][0])
-    with pytest.raises(ValueError, match=f"bases for {name}: basis 0 spans other maps"):
-        agent().load_state_dict(saved)
+    for model in ("model", "target_model"):
+        assert all(torch.equal(a, b) for a, b in zip(getattr(resumed.loss, model).parameters(),
+                                                     getattr(original.loss, model).parameters()))
+    # refused: a basis of other maps (not equivariant here), of fewer maps (a row
+    # repeated: inside the space, not all of it), of another shape
+    name = next(n for n, bases in saved["bases"].items() if len(bases[0]) > 1)
+    basis = saved["bases"][name][0]
+    for wrong, message in [(torch.randn_like(basis), "spans other maps"),
+                           (basis[[0] * len(basis)], "spans other maps"),
+                           (basis[:, :-1], "has shape")]:
+        saved["bases"][name][0] = wrong
+        with pytest.raises(ValueError, match=f"bases for {name}: basis 0 {message}"):
+            agent().load_state_dict(saved)

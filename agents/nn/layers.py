@@ -161,6 +161,12 @@ class EquivariantLinear(ScopedExpansion):
         return out.to(weight.device)
 
 
+def dense_equivariant_layers(module: nn.Module) -> dict[str, EquivariantLinear]:
+    """The ``EquivariantLinear`` layers of ``module`` by name (those inside a
+    ``SplitLinear`` included): the layers whose bases a checkpoint stores."""
+    return {name: m for name, m in module.named_modules() if isinstance(m, EquivariantLinear)}
+
+
 def _spans_within(a: torch.Tensor, b: torch.Tensor, rtol: float = 1e-5) -> bool:
     """Whether every row of ``a`` is a linear combination of the rows of ``b`` (up to
     float32 rounding): least squares in float64."""

@@ -13,7 +13,7 @@ from torchrl.objectives import SoftUpdate
 from agents.compat.escnn import is_basis_expansion_key, is_linear_buffer
 from agents.nn.escnn_groups import GROUP_NAMES
 from agents.nn.expansion import expansion_scope
-from agents.nn.layers import EquivariantLinear
+from agents.nn.layers import dense_equivariant_layers
 from agents.nn.networks import NetworkConfig, build_networks
 from agents.nn.spectral import GridActivation
 from agents.options import OptionError, check, from_dict, key, option
@@ -241,10 +241,11 @@ class TDMPCAgent:
     @torch.no_grad()
     def basis_fingerprints(self) -> dict[str, torch.Tensor]:
         """Each equivariant layer's map applied to a fixed probe, from the current
-        coefficients: checkpoints store coefficients only, and escnn computes some
-        bases numerically (octahedral, icosahedral), so a resume checks that the
-        rebuilt bases turn the same coefficients into the same maps. Likewise the
-        continuous groups' sampling grids, built from escnn's irreps.
+        coefficients: escnn computes some bases, transforms and irreps numerically
+        (and caches them on disk), and checkpoints store the coefficients and the dense
+        layers' bases only (``bases``), so a resume checks that the layers turn the same
+        coefficients into the same maps: the Fourier layers' transforms, and the
+        continuous groups' sampling grids, built from escnn's irreps, included.
 
         The map is applied by the layer's own forward (W p + b), not by expanding W:
         the same quantity, 20-50x cheaper for the irrep-basis layers of the paper
@@ -264,9 +265,8 @@ class TDMPCAgent:
         model's; the target's are the same): saved with the coefficients, so that a
         resume applies the bases they were trained with, whichever basis of the same
         space escnn solves for on the resuming machine."""
-        return {name: [basis.detach().cpu() for basis in module.bases()]
-                for name, module in self.model.named_modules()
-                if isinstance(module, EquivariantLinear)}
+        return {name: [basis.detach().cpu() for basis in layer.bases()]
+                for name, layer in dense_equivariant_layers(self.model).items()}
 
     def adopt_bases(self, saved: dict[str, list[torch.Tensor]]) -> None:
         """Apply ``saved`` (``bases()`` of the checkpoint) in the online and the target
@@ -276,11 +276,11 @@ class TDMPCAgent:
         if not saved:
             return
         for model in (self.model, self.loss.target_model):
-            layers = {name: module for name, module in model.named_modules()
-                      if isinstance(module, EquivariantLinear)}
+            layers = dense_equivariant_layers(model)
             if layers.keys() != saved.keys():
-                raise ValueError(f"the saved bases are for other layers ({sorted(saved)[:3]}) "
-                                 f"than this agent's ({sorted(layers)[:3]})")
+                raise ValueError(f"the saved bases are for other layers (only saved: "
+                                 f"{sorted(saved.keys() - layers.keys())[:3]}, only here: "
+                                 f"{sorted(layers.keys() - saved.keys())[:3]})")
             for name, layer in layers.items():
                 try:
                     layer.adopt_bases(saved[name])
