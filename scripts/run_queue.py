@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agents.run.checkpoint_state import LOCK_FILE, WRITE_PROBE, checkpoint_paths, saved_step
-from agents.run.run_log import cpu_flags, cpu_model
+from agents.run.machine import cpu_flags, cpu_model
 from agents.run.run_tables import wall_minutes
 
 REPO = Path(__file__).resolve().parent.parent
